@@ -1,1 +1,168 @@
-fn main() {}
+//! The `chicktrain` binary: flags in, one library call, errors printed once.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+
+use chicktrain::cli;
+use chicktrain::eval::IouType;
+
+/// Train instance segmentation of chicken carcass piles from real + rendered images.
+///
+/// `chicktrain --config configs/X.toml` is the same as `chicktrain train --config …`.
+#[derive(Parser)]
+#[command(name = "chicktrain", version, args_conflicts_with_subcommands = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    train: TrainArgs,
+}
+
+#[derive(Args, Clone)]
+struct TrainArgs {
+    /// Config file, or the name of a shipped config (e.g. yolo_syn1000.toml).
+    #[arg(long)]
+    config: Option<String>,
+    /// Override a config key, e.g. --set train.epochs=5 (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Write outputs here instead of runs/<name>/.
+    #[arg(long)]
+    run_dir: Option<PathBuf>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Train a model from a config (render, mix, train, evaluate every epoch, checkpoint).
+    Train(TrainArgs),
+    /// Evaluate a checkpoint on a split (arrives with the trainer).
+    Eval {
+        #[arg(long)]
+        checkpoint: PathBuf,
+    },
+    /// Predict masks on images with a checkpoint (arrives with the trainer).
+    Predict {
+        #[arg(long)]
+        checkpoint: PathBuf,
+        #[arg(long)]
+        input: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Render auto-labelled carcass piles (arrives with the renderer).
+    Render {
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Measure speed: `bench coco` times the COCO evaluator on a GT/DT pair.
+    Bench {
+        #[command(subcommand)]
+        what: BenchWhat,
+    },
+    /// COCO evaluation of a results file, identical to pycocotools' COCOeval.
+    CocoEval {
+        /// Ground-truth COCO instances file.
+        #[arg(long)]
+        gt: PathBuf,
+        /// Detections (COCO results JSON: a list of detections).
+        #[arg(long)]
+        dt: PathBuf,
+        /// bbox or segm.
+        #[arg(long, default_value = "segm")]
+        iou_type: IouType,
+        /// Print one JSON object with "stats" (the 12 numbers in pycocotools order).
+        #[arg(long)]
+        json: bool,
+    },
+    /// Convert between annotation formats.
+    Convert {
+        #[command(subcommand)]
+        what: ConvertWhat,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchWhat {
+    /// Time load + evaluate + accumulate (bbox and segm) on a GT/DT pair.
+    Coco {
+        #[arg(long)]
+        gt: PathBuf,
+        #[arg(long)]
+        dt: PathBuf,
+        #[arg(long, default_value_t = 21)]
+        repeats: usize,
+    },
+}
+
+#[derive(Subcommand)]
+enum ConvertWhat {
+    /// A folder of LabelMe .json files → one COCO instances file.
+    Labelme {
+        dir: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        /// labelme's labels.txt (one label per line) to fix the category order.
+        #[arg(long)]
+        labels: Option<PathBuf>,
+    },
+    /// A COCO instances file → YOLO-seg label files (ultralytics format).
+    Coco2yolo {
+        coco: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+fn run(cli: Cli) -> anyhow::Result<String> {
+    let not_yet = |what: &str, issue: &str| -> anyhow::Result<String> {
+        anyhow::bail!("`chicktrain {what}` is not in this build yet (it arrives with the {issue})")
+    };
+    match cli.command {
+        None => match cli.train.config {
+            Some(c) => cli::train(&c, &cli.train.set, cli.train.run_dir),
+            None => anyhow::bail!("nothing to do: give --config FILE or a subcommand (see --help)"),
+        },
+        Some(Command::Train(t)) => match t.config {
+            Some(c) => cli::train(&c, &t.set, t.run_dir),
+            None => {
+                anyhow::bail!("train needs --config FILE (or a shipped name like quickstart.toml)")
+            }
+        },
+        Some(Command::Eval { .. }) => not_yet("eval", "YOLO-seg trainer"),
+        Some(Command::Predict { .. }) => not_yet("predict", "YOLO-seg trainer"),
+        Some(Command::Render { .. }) => not_yet("render", "built-in renderer"),
+        Some(Command::Bench { what }) => match what {
+            BenchWhat::Coco { gt, dt, repeats } => cli::bench_coco(&gt, &dt, repeats),
+        },
+        Some(Command::CocoEval {
+            gt,
+            dt,
+            iou_type,
+            json,
+        }) => cli::coco_eval(&gt, &dt, iou_type, json),
+        Some(Command::Convert { what }) => match what {
+            ConvertWhat::Labelme { dir, out, labels } => {
+                cli::convert_labelme(&dir, labels.as_deref(), &out)
+            }
+            ConvertWhat::Coco2yolo { coco, out } => cli::convert_coco2yolo(&coco, &out),
+        },
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(msg) => {
+            if !msg.is_empty() {
+                println!("{}", msg.trim_end());
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,608 @@
+//! The COCO evaluator, reproducing pycocotools 2.0.11's `COCOeval` bit for bit.
+//!
+//! Every epoch's metrics, every bench row and every claim against the paper go through
+//! this file, so it follows `cocoeval.py` step by step rather than re-deriving mAP:
+//! `loadRes` (box area for results that carry a box, ids from 1), `evaluateImg` (stable
+//! score sort, ignored GTs last, greedy matching with the `1 − 1e−10` cap, crowd reuse,
+//! unmatched detections outside the area range ignored), `accumulate` (stable merge of
+//! per-image top-k, 101-point interpolation, −1 for categories without GT) and
+//! `summarize` (numpy's pairwise-summed mean over the entries > −1). Its quirks are kept
+//! on purpose, e.g. a GT whose id is 0 never counts as matched, exactly as in pycocotools.
+
+use std::collections::HashMap;
+
+use anyhow::{bail, Context, Result};
+
+use crate::data::coco::{CocoDataset, Detection, Segmentation};
+use crate::data::rle::{bbox_iou, rle_iou, Rle};
+
+/// Which geometry IoU is computed on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum IouType {
+    Bbox,
+    Segm,
+}
+
+impl std::str::FromStr for IouType {
+    type Err = anyhow::Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "bbox" => Ok(IouType::Bbox),
+            "segm" => Ok(IouType::Segm),
+            _ => bail!("unknown IoU type {s:?}: use bbox or segm"),
+        }
+    }
+}
+
+/// Names of the 12 stats, in pycocotools order.
+pub const STAT_NAMES: [&str; 12] = [
+    "AP", "AP50", "AP75", "APs", "APm", "APl", "AR1", "AR10", "AR100", "ARs", "ARm", "ARl",
+];
+
+const AREA_RANGES: [[f64; 2]; 4] = [[0.0, 1e10], [0.0, 1024.0], [1024.0, 9216.0], [9216.0, 1e10]];
+const AREA_LABELS: [&str; 4] = ["all", "small", "medium", "large"];
+const MAX_DETS: [usize; 3] = [1, 10, 100];
+
+/// `np.linspace(start, stop, num)` with numpy's exact float operations.
+fn linspace(start: f64, stop: f64, num: usize) -> Vec<f64> {
+    let step = (stop - start) / (num - 1) as f64;
+    let mut y: Vec<f64> = (0..num).map(|i| i as f64 * step + start).collect();
+    y[num - 1] = stop;
+    y
+}
+
+/// numpy's pairwise summation (`pairwise_sum_DOUBLE`), which `np.mean` uses.
+fn pairwise_sum(a: &[f64]) -> f64 {
+    let n = a.len();
+    if n < 8 {
+        let mut res = 0.0;
+        for &v in a {
+            res += v;
+        }
+        res
+    } else if n <= 128 {
+        let mut r = [0.0f64; 8];
+        r.copy_from_slice(&a[..8]);
+        let mut i = 8;
+        while i < n - (n % 8) {
+            for j in 0..8 {
+                r[j] += a[i + j];
+            }
+            i += 8;
+        }
+        let mut res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        while i < n {
+            res += a[i];
+            i += 1;
+        }
+        res
+    } else {
+        let mut n2 = n / 2;
+        n2 -= n2 % 8;
+        pairwise_sum(&a[..n2]) + pairwise_sum(&a[n2..])
+    }
+}
+
+struct Inst {
+    id: u64,
+    area: f64,
+    crowd: bool,
+    score: f64,
+    bbox: [f64; 4],
+    rle: Option<Rle>,
+    rle_box: [f64; 4],
+}
+
+/// Per image × category × area range: what `evaluateImg` returns.
+struct ImgEval {
+    /// Scores of the kept detections, sorted (stable) high to low.
+    scores: Vec<f64>,
+    /// `[t][d]`: matched to a GT whose id is non-zero (pycocotools' `dtm != 0`).
+    dt_matched: Vec<Vec<bool>>,
+    /// `[t][d]`
+    dt_ignore: Vec<Vec<bool>>,
+    gt_ignore: Vec<bool>,
+}
+
+/// Everything `COCOeval` computes, kept for reports and plots.
+#[derive(Clone, Debug)]
+pub struct CocoEvalResult {
+    pub iou_type: IouType,
+    pub stats: [f64; 12],
+    pub iou_thrs: Vec<f64>,
+    pub rec_thrs: Vec<f64>,
+    pub cat_ids: Vec<u64>,
+    /// `[T][R][K][A][M]`, flattened in C order; −1 where a category has no GT.
+    pub precision: Vec<f64>,
+    /// `[T][K][A][M]`, flattened in C order.
+    pub recall: Vec<f64>,
+}
+
+/// The detections as `loadRes` turns them into annotations.
+struct DtAnn<'a> {
+    det: &'a Detection,
+    id: u64,
+    area: f64,
+    bbox: [f64; 4],
+}
+
+fn load_res<'a>(gt: &CocoDataset, dets: &'a [Detection]) -> Result<Vec<DtAnn<'a>>> {
+    let sizes: HashMap<u64, (u32, u32)> = gt
+        .images
+        .iter()
+        .map(|im| (im.id, (im.height, im.width)))
+        .collect();
+    let box_branch = dets.first().is_some_and(|d| d.bbox.is_some());
+    let mut out = Vec::with_capacity(dets.len());
+    for (i, d) in dets.iter().enumerate() {
+        let Some(&(h, w)) = sizes.get(&d.image_id) else {
+            bail!(
+                "detection {i} is for image_id {}, which is not in the ground truth",
+                d.image_id
+            );
+        };
+        let (area, bbox) = if box_branch {
+            let bb = d.bbox.with_context(|| {
+                format!("detection {i} has no bbox, but the first detection has one")
+            })?;
+            (bb[2] * bb[3], bb)
+        } else {
+            let seg = d
+                .segmentation
+                .as_ref()
+                .with_context(|| format!("detection {i} has neither bbox nor segmentation"))?;
+            let rle = seg
+                .to_rle(h, w)
+                .with_context(|| format!("detection {i} (image {})", d.image_id))?;
+            (rle.area() as f64, d.bbox.unwrap_or_else(|| rle.bbox()))
+        };
+        out.push(DtAnn {
+            det: d,
+            id: i as u64 + 1,
+            area,
+            bbox,
+        });
+    }
+    Ok(out)
+}
+
+/// Evaluates `dets` against `gt` exactly as pycocotools' `COCOeval` (+ `loadRes`) would.
+pub fn evaluate(gt: &CocoDataset, dets: &[Detection], iou_type: IouType) -> Result<CocoEvalResult> {
+    let iou_thrs = linspace(0.5, 0.95, 10);
+    let rec_thrs = linspace(0.0, 1.0, 101);
+    let mut img_ids: Vec<u64> = gt.images.iter().map(|im| im.id).collect();
+    img_ids.sort_unstable();
+    img_ids.dedup();
+    let mut cat_ids: Vec<u64> = gt.categories.iter().map(|c| c.id).collect();
+    cat_ids.sort_unstable();
+    cat_ids.dedup();
+    let (ni, nk) = (img_ids.len(), cat_ids.len());
+    let img_index: HashMap<u64, usize> =
+        img_ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
+    let cat_index: HashMap<u64, usize> =
+        cat_ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
+    let sizes: HashMap<u64, (u32, u32)> = gt
+        .images
+        .iter()
+        .map(|im| (im.id, (im.height, im.width)))
+        .collect();
+
+    let segm = iou_type == IouType::Segm;
+    let mut gts: Vec<Vec<Inst>> = (0..ni * nk).map(|_| Vec::new()).collect();
+    for a in &gt.annotations {
+        let (Some(&i), Some(&k)) = (img_index.get(&a.image_id), cat_index.get(&a.category_id))
+        else {
+            bail!(
+                "GT annotation {} refers to an unknown image or category",
+                a.id
+            );
+        };
+        let rle = if segm {
+            let (h, w) = sizes[&a.image_id];
+            Some(
+                a.segmentation
+                    .to_rle(h, w)
+                    .with_context(|| format!("GT annotation {}", a.id))?,
+            )
+        } else {
+            None
+        };
+        let rle_box = rle.as_ref().map_or([0.0; 4], |r| r.bbox());
+        gts[i * nk + k].push(Inst {
+            id: a.id,
+            area: a.area,
+            crowd: a.iscrowd != 0,
+            score: 0.0,
+            bbox: a.bbox,
+            rle,
+            rle_box,
+        });
+    }
+    let mut dts: Vec<Vec<Inst>> = (0..ni * nk).map(|_| Vec::new()).collect();
+    for d in load_res(gt, dets)? {
+        let Some(&k) = cat_index.get(&d.det.category_id) else {
+            continue; // pycocotools only evaluates the GT's categories
+        };
+        let i = img_index[&d.det.image_id];
+        let rle =
+            if segm {
+                let (h, w) = sizes[&d.det.image_id];
+                let seg = match &d.det.segmentation {
+                    Some(s) => s.clone(),
+                    None => {
+                        let b = d.bbox;
+                        let (x1, x2, y1, y2) = (b[0], b[0] + b[2], b[1], b[1] + b[3]);
+                        Segmentation::Polygons(vec![vec![x1, y1, x1, y2, x2, y2, x2, y1]])
+                    }
+                };
+                Some(seg.to_rle(h, w).with_context(|| {
+                    format!("detection {} (image {})", d.id - 1, d.det.image_id)
+                })?)
+            } else {
+                None
+            };
+        let rle_box = rle.as_ref().map_or([0.0; 4], |r| r.bbox());
+        dts[i * nk + k].push(Inst {
+            id: d.id,
+            area: d.area,
+            crowd: false,
+            score: d.det.score,
+            bbox: d.bbox,
+            rle,
+            rle_box,
+        });
+    }
+    let max_det = *MAX_DETS.last().unwrap_or(&100);
+    // computeIoU: detections sorted by score (stable), top maxDet, IoU [d][g].
+    let mut ious: Vec<Vec<f64>> = Vec::with_capacity(ni * nk);
+    for (g, d) in gts.iter().zip(dts.iter_mut()) {
+        d.sort_by(|a, b| desc_score(a.score, b.score));
+        d.truncate(max_det);
+        let mut m = Vec::with_capacity(d.len() * g.len());
+        for di in d.iter() {
+            for gi in g.iter() {
+                m.push(match (&di.rle, &gi.rle) {
+                    (Some(dr), Some(gr)) => rle_iou(dr, &di.rle_box, gr, &gi.rle_box, gi.crowd),
+                    _ => bbox_iou(&di.bbox, &gi.bbox, gi.crowd),
+                });
+            }
+        }
+        ious.push(m);
+    }
+    // evaluateImg for every category × area range × image (pycocotools' order).
+    let nt = iou_thrs.len();
+    let na = AREA_RANGES.len();
+    let mut evals: Vec<Option<ImgEval>> = Vec::with_capacity(nk * na * ni);
+    for k in 0..nk {
+        for rng in AREA_RANGES {
+            for i in 0..ni {
+                let cell = i * nk + k;
+                evals.push(evaluate_img(
+                    &gts[cell],
+                    &dts[cell],
+                    &ious[cell],
+                    rng,
+                    max_det,
+                    &iou_thrs,
+                ));
+            }
+        }
+    }
+    // accumulate
+    let nr = rec_thrs.len();
+    let nm = MAX_DETS.len();
+    let mut precision = vec![-1.0; nt * nr * nk * na * nm];
+    let mut recall = vec![-1.0; nt * nk * na * nm];
+    let eps = f64::EPSILON; // np.spacing(1)
+    for k in 0..nk {
+        for a in 0..na {
+            for (m, &md) in MAX_DETS.iter().enumerate() {
+                let es: Vec<&ImgEval> = (0..ni)
+                    .filter_map(|i| evals[k * na * ni + a * ni + i].as_ref())
+                    .collect();
+                if es.is_empty() {
+                    continue;
+                }
+                let mut scores = Vec::new();
+                let mut owner = Vec::new(); // (eval index, detection index)
+                for (e_i, e) in es.iter().enumerate() {
+                    for d in 0..e.scores.len().min(md) {
+                        scores.push(e.scores[d]);
+                        owner.push((e_i, d));
+                    }
+                }
+                let mut order: Vec<usize> = (0..scores.len()).collect();
+                order.sort_by(|&x, &y| desc_score(scores[x], scores[y]));
+                let npig = es
+                    .iter()
+                    .map(|e| e.gt_ignore.iter().filter(|&&g| !g).count())
+                    .sum::<usize>();
+                if npig == 0 {
+                    continue;
+                }
+                let nd = order.len();
+                let mut rc = vec![0.0; nd];
+                let mut pr = vec![0.0; nd];
+                for t in 0..nt {
+                    let (mut tp, mut fp) = (0.0f64, 0.0f64);
+                    for (j, &o) in order.iter().enumerate() {
+                        let (e_i, d) = owner[o];
+                        let e = es[e_i];
+                        if !e.dt_ignore[t][d] {
+                            if e.dt_matched[t][d] {
+                                tp += 1.0;
+                            } else {
+                                fp += 1.0;
+                            }
+                        }
+                        rc[j] = tp / npig as f64;
+                        pr[j] = tp / (fp + tp + eps);
+                    }
+                    recall[((t * nk + k) * na + a) * nm + m] =
+                        if nd > 0 { rc[nd - 1] } else { 0.0 };
+                    for j in (1..nd).rev() {
+                        if pr[j] > pr[j - 1] {
+                            pr[j - 1] = pr[j];
+                        }
+                    }
+                    let mut j = 0;
+                    for (r, &thr) in rec_thrs.iter().enumerate() {
+                        while j < nd && rc[j] < thr {
+                            j += 1;
+                        }
+                        let q = if j < nd { pr[j] } else { 0.0 };
+                        precision[(((t * nr + r) * nk + k) * na + a) * nm + m] = q;
+                    }
+                }
+            }
+        }
+    }
+    let mut result = CocoEvalResult {
+        iou_type,
+        stats: [0.0; 12],
+        iou_thrs,
+        rec_thrs,
+        cat_ids,
+        precision,
+        recall,
+    };
+    result.stats = [
+        result.summarize(true, None, "all", 100),
+        result.summarize(true, Some(0.5), "all", 100),
+        result.summarize(true, Some(0.75), "all", 100),
+        result.summarize(true, None, "small", 100),
+        result.summarize(true, None, "medium", 100),
+        result.summarize(true, None, "large", 100),
+        result.summarize(false, None, "all", 1),
+        result.summarize(false, None, "all", 10),
+        result.summarize(false, None, "all", 100),
+        result.summarize(false, None, "small", 100),
+        result.summarize(false, None, "medium", 100),
+        result.summarize(false, None, "large", 100),
+    ];
+    Ok(result)
+}
+
+/// `np.argsort(-score, kind='mergesort')` as a comparator: high first, NaN last, stable.
+fn desc_score(a: f64, b: f64) -> std::cmp::Ordering {
+    let (na, nb) = (-a, -b);
+    match (na.is_nan(), nb.is_nan()) {
+        (true, true) => std::cmp::Ordering::Equal,
+        (true, false) => std::cmp::Ordering::Greater,
+        (false, true) => std::cmp::Ordering::Less,
+        _ => na.partial_cmp(&nb).unwrap_or(std::cmp::Ordering::Equal),
+    }
+}
+
+fn evaluate_img(
+    gt: &[Inst],
+    dt: &[Inst],
+    ious: &[f64],
+    rng: [f64; 2],
+    max_det: usize,
+    iou_thrs: &[f64],
+) -> Option<ImgEval> {
+    if gt.is_empty() && dt.is_empty() {
+        return None;
+    }
+    let ng = gt.len();
+    let flag: Vec<bool> = gt
+        .iter()
+        .map(|g| g.crowd || g.area < rng[0] || g.area > rng[1])
+        .collect();
+    // Ignored GTs last, stable.
+    let mut gtind: Vec<usize> = (0..ng).collect();
+    gtind.sort_by_key(|&g| flag[g]);
+    let gt_ignore: Vec<bool> = gtind.iter().map(|&g| flag[g]).collect();
+    let nd = dt.len().min(max_det);
+    let nt = iou_thrs.len();
+    let mut dt_matched = vec![vec![false; nd]; nt];
+    let mut dt_ignore = vec![vec![false; nd]; nt];
+    if !ious.is_empty() {
+        for (t, &thr) in iou_thrs.iter().enumerate() {
+            let mut gt_taken = vec![false; ng];
+            for d in 0..nd {
+                let mut iou = thr.min(1.0 - 1e-10);
+                let mut m: Option<usize> = None;
+                for (gs, &g) in gtind.iter().enumerate() {
+                    if gt_taken[gs] && !gt[g].crowd {
+                        continue;
+                    }
+                    if let Some(mm) = m {
+                        if !gt_ignore[mm] && gt_ignore[gs] {
+                            break;
+                        }
+                    }
+                    let v = ious[d * ng + g];
+                    if v < iou {
+                        continue;
+                    }
+                    iou = v;
+                    m = Some(gs);
+                }
+                let Some(mm) = m else { continue };
+                dt_ignore[t][d] = gt_ignore[mm];
+                dt_matched[t][d] = gt[gtind[mm]].id != 0;
+                gt_taken[mm] = true;
+            }
+        }
+    }
+    for d in 0..nd {
+        let out = dt[d].area < rng[0] || dt[d].area > rng[1];
+        for t in 0..nt {
+            dt_ignore[t][d] = dt_ignore[t][d] || (!dt_matched[t][d] && out);
+        }
+    }
+    Some(ImgEval {
+        scores: dt[..nd].iter().map(|d| d.score).collect(),
+        dt_matched,
+        dt_ignore,
+        gt_ignore,
+    })
+}
+
+impl CocoEvalResult {
+    fn summarize(&self, ap: bool, iou_thr: Option<f64>, area: &str, max_dets: usize) -> f64 {
+        let (nt, nr, nk, na, nm) = (
+            self.iou_thrs.len(),
+            self.rec_thrs.len(),
+            self.cat_ids.len(),
+            AREA_LABELS.len(),
+            MAX_DETS.len(),
+        );
+        let Some(a) = AREA_LABELS.iter().position(|&l| l == area) else {
+            return -1.0;
+        };
+        let Some(m) = MAX_DETS.iter().position(|&d| d == max_dets) else {
+            return -1.0;
+        };
+        let ts: Vec<usize> = match iou_thr {
+            Some(thr) => (0..nt).filter(|&t| self.iou_thrs[t] == thr).collect(),
+            None => (0..nt).collect(),
+        };
+        let mut vals = Vec::new();
+        for &t in &ts {
+            if ap {
+                for r in 0..nr {
+                    for k in 0..nk {
+                        let v = self.precision[(((t * nr + r) * nk + k) * na + a) * nm + m];
+                        if v > -1.0 {
+                            vals.push(v);
+                        }
+                    }
+                }
+            } else {
+                for k in 0..nk {
+                    let v = self.recall[((t * nk + k) * na + a) * nm + m];
+                    if v > -1.0 {
+                        vals.push(v);
+                    }
+                }
+            }
+        }
+        if vals.is_empty() {
+            -1.0
+        } else {
+            pairwise_sum(&vals) / vals.len() as f64
+        }
+    }
+
+    /// AP@[.5:.95] of one category (area all, 100 detections), −1 without GT.
+    pub fn category_ap(&self, cat_id: u64) -> f64 {
+        let Some(k) = self.cat_ids.iter().position(|&c| c == cat_id) else {
+            return -1.0;
+        };
+        let (nt, nr, nk, na, nm) = (
+            self.iou_thrs.len(),
+            self.rec_thrs.len(),
+            self.cat_ids.len(),
+            4,
+            3,
+        );
+        let vals: Vec<f64> = (0..nt)
+            .flat_map(|t| (0..nr).map(move |r| (t, r)))
+            .map(|(t, r)| self.precision[(((t * nr + r) * nk + k) * na) * nm + 2])
+            .filter(|&v| v > -1.0)
+            .collect();
+        if vals.is_empty() {
+            -1.0
+        } else {
+            pairwise_sum(&vals) / vals.len() as f64
+        }
+    }
+
+    /// The 12 lines pycocotools' `summarize()` prints.
+    pub fn summary(&self) -> String {
+        let mut s = String::new();
+        let rows: [(bool, Option<f64>, &str, usize); 12] = [
+            (true, None, "all", 100),
+            (true, Some(0.5), "all", 100),
+            (true, Some(0.75), "all", 100),
+            (true, None, "small", 100),
+            (true, None, "medium", 100),
+            (true, None, "large", 100),
+            (false, None, "all", 1),
+            (false, None, "all", 10),
+            (false, None, "all", 100),
+            (false, None, "small", 100),
+            (false, None, "medium", 100),
+            (false, None, "large", 100),
+        ];
+        for (i, (ap, thr, area, md)) in rows.into_iter().enumerate() {
+            let (title, kind) = if ap {
+                ("Average Precision", "(AP)")
+            } else {
+                ("Average Recall", "(AR)")
+            };
+            let iou = match thr {
+                Some(t) => format!("{t:0.2}"),
+                None => format!(
+                    "{:0.2}:{:0.2}",
+                    self.iou_thrs[0],
+                    self.iou_thrs[self.iou_thrs.len() - 1]
+                ),
+            };
+            s.push_str(&format!(
+                " {:<18} {} @[ IoU={:<9} | area={:>6} | maxDets={:>3} ] = {:0.3}\n",
+                title, kind, iou, area, md, self.stats[i]
+            ));
+        }
+        s
+    }
+
+    /// `{"iou_type", "stats": [12], "AP": .., ...}` for scripts.
+    pub fn to_json(&self) -> serde_json::Value {
+        let mut o = serde_json::Map::new();
+        o.insert(
+            "iou_type".into(),
+            serde_json::to_value(self.iou_type).unwrap_or_default(),
+        );
+        o.insert("stats".into(), serde_json::json!(self.stats.to_vec()));
+        for (name, v) in STAT_NAMES.iter().zip(self.stats) {
+            o.insert((*name).into(), serde_json::json!(v));
+        }
+        serde_json::Value::Object(o)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thresholds_are_numpy_linspace() {
+        let t = linspace(0.5, 0.95, 10);
+        assert_eq!(t[5], 0.75);
+        assert_eq!(t[1], 0.55);
+        assert_eq!(linspace(0.0, 1.0, 101)[7], 0.07);
+    }
+
+    #[test]
+    fn pairwise_sum_matches_numpy_blocks() {
+        let v: Vec<f64> = (0..1000).map(|i| 1.0 / (i as f64 + 1.0)).collect();
+        let naive: f64 = v.iter().sum();
+        assert!((pairwise_sum(&v) - naive).abs() < 1e-12);
+        assert_eq!(pairwise_sum(&v[..3]), v[0] + v[1] + v[2]);
+    }
+}
