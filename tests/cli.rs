@@ -1,0 +1,152 @@
+//! The binary end to end: commands, exit codes and bad-input messages (never a panic).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_chicktrain"))
+}
+
+fn fixtures() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/coco")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ct-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn run(args: &[&str]) -> Output {
+    bin().args(args).output().unwrap()
+}
+
+/// Fails unless the command exited 2 with an error naming every needle, and no panic.
+fn assert_clean_error(out: &Output, needles: &[&str]) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    for n in needles {
+        assert!(err.contains(n), "{err:?} should mention {n:?}");
+    }
+}
+
+#[test]
+fn coco_eval_json_prints_the_12_stats() {
+    let gt = fixtures().join("cases/02_gt.json");
+    let dt = fixtures().join("cases/02_dt.json");
+    let out = run(&["coco-eval", "--gt", gt.to_str().unwrap(), "--dt", dt.to_str().unwrap(), "--iou-type", "segm", "--json"]);
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let expected: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fixtures().join("expected.json")).unwrap()).unwrap();
+    assert_eq!(v["stats"], expected["02"]["segm"]);
+    let text = run(&["coco-eval", "--gt", gt.to_str().unwrap(), "--dt", dt.to_str().unwrap(), "--iou-type", "bbox"]);
+    let s = String::from_utf8_lossy(&text.stdout);
+    assert_eq!(s.lines().count(), 12);
+    assert!(s.starts_with(" Average Precision  (AP) @[ IoU=0.50:0.95 | area=   all | maxDets=100 ] = "));
+}
+
+#[test]
+fn every_subcommand_has_help() {
+    for sub in ["train", "eval", "predict", "render", "bench", "coco-eval", "convert"] {
+        let out = run(&[sub, "--help"]);
+        assert!(out.status.success(), "{sub} --help");
+        assert!(!out.stdout.is_empty());
+    }
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> String {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p.to_string_lossy().into_owned()
+}
+
+#[test]
+fn bad_coco_inputs_name_the_file_and_entry() {
+    let d = tmp("coco");
+    let good_gt = std::fs::read_to_string(fixtures().join("cases/01_gt.json")).unwrap();
+    let gt = write(&d, "gt.json", &good_gt);
+    let dt_ok = r#"[{"image_id": 10, "category_id": 1, "score": 0.5, "bbox": [1, 2, 3, 4]}]"#;
+    let cases: Vec<(&str, String, String, Vec<&str>)> = vec![
+        ("missing gt", d.join("nope.json").to_string_lossy().into(), dt_ok.into(), vec!["nope.json", "cannot read"]),
+        ("truncated gt", write(&d, "t.json", &good_gt[..good_gt.len() / 2]), dt_ok.into(), vec!["t.json", "invalid COCO JSON"]),
+        ("gt not an object", write(&d, "arr.json", "[1, 2]"), dt_ok.into(), vec!["arr.json"]),
+        ("unknown image in results", gt.clone(), r#"[{"image_id": 999, "category_id": 1, "score": 0.5, "bbox": [1, 2, 3, 4]}]"#.into(), vec!["image_id 999", "not in the ground truth"]),
+        ("broken results json", gt.clone(), "[{".into(), vec!["dt.json", "invalid COCO results JSON"]),
+        ("results wrong type", gt.clone(), r#"[{"image_id": "ten", "category_id": 1, "score": 0.5}]"#.into(), vec!["dt.json"]),
+        ("rle of the wrong size", gt.clone(), r#"[{"image_id": 10, "category_id": 1, "score": 0.5, "segmentation": {"size": [4, 4], "counts": "52203"}}]"#.into(), vec!["detection 0", "disagrees"]),
+        ("bad rle string", gt.clone(), r#"[{"image_id": 10, "category_id": 1, "score": 0.5, "segmentation": {"size": [96, 128], "counts": "5 2"}}]"#.into(), vec!["detection 0", "outside the COCO alphabet"]),
+        ("polygon of two points", gt.clone(), r#"[{"image_id": 10, "category_id": 1, "score": 0.5, "segmentation": [[1, 1, 5, 5]]}]"#.into(), vec!["detection 0", "at least 3 points"]),
+        ("later detection without bbox", gt.clone(), r#"[{"image_id": 10, "category_id": 1, "score": 0.5, "bbox": [1, 2, 3, 4]}, {"image_id": 10, "category_id": 1, "score": 0.4}]"#.into(), vec!["detection 1 has no bbox"]),
+    ];
+    for (what, gt_path, dt_text, needles) in cases {
+        let dt = write(&d, "dt.json", &dt_text);
+        let out = run(&["coco-eval", "--gt", &gt_path, "--dt", &dt, "--iou-type", "segm"]);
+        eprintln!("case: {what}");
+        assert_clean_error(&out, &needles);
+    }
+    // GT-side problems, made by editing the parsed file
+    let edits: Vec<(&str, fn(&mut serde_json::Value), &str)> = vec![
+        ("unknown category", |v| v["annotations"][0]["category_id"] = 42.into(), "category_id 42"),
+        ("negative box", |v| v["annotations"][0]["bbox"] = serde_json::json!([1, 1, -5, 3]), "negative"),
+        ("duplicate annotation id", |v| {
+            let first = v["annotations"][0]["id"].clone();
+            v["annotations"][1]["id"] = first;
+        }, "appears twice"),
+        ("string iscrowd", |v| v["annotations"][0]["iscrowd"] = "no".into(), "iscrowd"),
+        ("missing area", |v| {
+            v["annotations"][0].as_object_mut().unwrap().remove("area");
+        }, "missing field `area`"),
+    ];
+    for (what, edit, needle) in edits {
+        let mut v: serde_json::Value = serde_json::from_str(&good_gt).unwrap();
+        edit(&mut v);
+        let g = write(&d, "gt_bad.json", &v.to_string());
+        let dt = write(&d, "dt.json", dt_ok);
+        eprintln!("case: {what}");
+        assert_clean_error(&run(&["coco-eval", "--gt", &g, "--dt", &dt]), &["gt_bad.json", needle]);
+    }
+    // extra fields are fine: real COCO files carry them
+    let mut v: serde_json::Value = serde_json::from_str(&good_gt).unwrap();
+    v["images"][0]["coco_url"] = "http://x".into();
+    v["annotations"][0]["attributes"] = serde_json::json!({"occluded": false});
+    let g = write(&d, "gt_extra.json", &v.to_string());
+    let dt = write(&d, "dt.json", dt_ok);
+    assert!(run(&["coco-eval", "--gt", &g, "--dt", &dt]).status.success());
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn config_typos_and_bad_values_exit_2_with_the_key() {
+    let d = tmp("cfg");
+    let base = std::fs::read_to_string(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/quickstart.toml")).unwrap();
+    let typo = write(&d, "typo.toml", &base.replace("epochs = 10", "epoch = 10"));
+    assert_clean_error(&run(&["--config", &typo]), &["typo.toml", "unknown field `epoch`"]);
+    assert_clean_error(&run(&["--config", "no_such_config.toml"]), &["no_such_config.toml", "quickstart.toml"]);
+    assert_clean_error(&run(&["--config", "quickstart.toml", "--set", "train.batch=0"]), &["train.batch"]);
+    assert_clean_error(&run(&["train", "--config", "quickstart", "--set", "data.real.kind=\"coco\""]), &["data.real.annotations"]);
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn coco2yolo_writes_normalised_polygons() {
+    let d = tmp("yolo");
+    let gt = write(
+        &d,
+        "gt.json",
+        r#"{"images": [{"id": 1, "file_name": "imgs/a.jpg", "width": 100, "height": 50}],
+            "categories": [{"id": 3, "name": "carcass"}],
+            "annotations": [
+              {"id": 1, "image_id": 1, "category_id": 3, "segmentation": [[10, 10, 60, 10, 60, 40]], "area": 750, "bbox": [10, 10, 50, 30], "iscrowd": 0},
+              {"id": 2, "image_id": 1, "category_id": 3, "segmentation": {"size": [50, 100], "counts": [0, 50, 4950]}, "area": 50, "bbox": [0, 0, 1, 50], "iscrowd": 1}
+            ]}"#,
+    );
+    let out = run(&["convert", "coco2yolo", &gt, "--out", d.join("y").to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let txt = std::fs::read_to_string(d.join("y/labels/a.txt")).unwrap();
+    assert_eq!(txt, "0 0.1 0.2 0.6 0.2 0.6 0.8\n");
+    assert!(std::fs::read_to_string(d.join("y/data.yaml")).unwrap().contains("0: carcass"));
+    std::fs::remove_dir_all(&d).unwrap();
+}
