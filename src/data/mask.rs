@@ -1,0 +1,63 @@
+//! Binary instance masks as the rest of chicktrain sees them: row-major, one byte per pixel.
+//!
+//! Images, renders and model outputs are row-major; only the RLE codec (`rle.rs`) walks
+//! masks column-major, because that is the order pycocotools' run lengths are defined in.
+
+/// A binary mask, `data[y * width + x]`, 0 = background, anything else = foreground.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Mask {
+    pub height: u32,
+    pub width: u32,
+    pub data: Vec<u8>,
+}
+
+impl Mask {
+    /// An all-background mask.
+    pub fn new(height: u32, width: u32) -> Mask {
+        Mask {
+            height,
+            width,
+            data: vec![0; height as usize * width as usize],
+        }
+    }
+
+    /// Wraps row-major bytes; `None` when the length does not match the size.
+    pub fn from_row_major(height: u32, width: u32, data: Vec<u8>) -> Option<Mask> {
+        (data.len() == height as usize * width as usize).then_some(Mask {
+            height,
+            width,
+            data,
+        })
+    }
+
+    #[inline]
+    pub fn get(&self, x: u32, y: u32) -> bool {
+        self.data[y as usize * self.width as usize + x as usize] != 0
+    }
+
+    #[inline]
+    pub fn set(&mut self, x: u32, y: u32, on: bool) {
+        self.data[y as usize * self.width as usize + x as usize] = on as u8;
+    }
+
+    /// Number of foreground pixels.
+    pub fn area(&self) -> u64 {
+        self.data.iter().filter(|&&v| v != 0).count() as u64
+    }
+
+    /// Pixel-wise intersection over union of two masks of one size (0 when both are empty).
+    pub fn iou(&self, other: &Mask) -> f64 {
+        assert_eq!((self.height, self.width), (other.height, other.width));
+        let (mut inter, mut union) = (0u64, 0u64);
+        for (&a, &b) in self.data.iter().zip(&other.data) {
+            let (a, b) = (a != 0, b != 0);
+            inter += (a && b) as u64;
+            union += (a || b) as u64;
+        }
+        if union == 0 {
+            0.0
+        } else {
+            inter as f64 / union as f64
+        }
+    }
+}

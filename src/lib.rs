@@ -1,0 +1,3 @@
+//! chicktrain library: data layer and the built-in renderer.
+pub mod data;
+pub mod render;

@@ -1,0 +1,4 @@
+//! Built-in renderer.
+pub mod carcass;
+pub mod glb;
+pub mod mesh;
