@@ -66,12 +66,12 @@ struct Side {
 fn side(s: f32) -> Side {
     Side {
         hip: Vec3::new(-0.035, s * 0.052, -0.012),
-        knee: Vec3::new(0.012, s * 0.092, 0.022),
-        hock: Vec3::new(-0.098, s * 0.083, 0.050),
+        knee: Vec3::new(0.000, s * 0.085, 0.026),
+        hock: Vec3::new(-0.108, s * 0.058, 0.048),
         shoulder: Vec3::new(0.068, s * 0.058, 0.004),
-        elbow: Vec3::new(0.020, s * 0.112, -0.016),
-        wrist: Vec3::new(0.088, s * 0.128, -0.028),
-        tip: Vec3::new(0.040, s * 0.150, -0.036),
+        elbow: Vec3::new(0.012, s * 0.098, -0.018),
+        wrist: Vec3::new(0.082, s * 0.104, -0.030),
+        tip: Vec3::new(0.030, s * 0.115, -0.045),
     }
 }
 
@@ -111,17 +111,52 @@ pub fn red_spots() -> Vec<(Vec3, f32)> {
 fn prims() -> Vec<(Prim, usize)> {
     use Prim::*;
     let mut v = vec![
-        (Ellipsoid(Vec3::new(0.0, 0.0, -0.002), Vec3::new(0.108, 0.070, 0.056)), 0),
-        (Ellipsoid(Vec3::new(0.030, 0.030, 0.018), Vec3::new(0.085, 0.043, 0.050)), 0),
-        (Ellipsoid(Vec3::new(0.030, -0.030, 0.018), Vec3::new(0.085, 0.043, 0.050)), 0),
-        (Ellipsoid(Vec3::new(0.040, 0.0, 0.046), Vec3::new(0.070, 0.010, 0.020)), 0),
-        (Cone(Vec3::new(0.085, 0.0, 0.0), Vec3::new(0.128, 0.0, -0.004), 0.030, 0.019), 0),
-        (Ellipsoid(Vec3::new(-0.112, 0.0, -0.010), Vec3::new(0.026, 0.030, 0.020)), 0),
+        (
+            Ellipsoid(Vec3::new(0.0, 0.0, -0.002), Vec3::new(0.108, 0.070, 0.056)),
+            0,
+        ),
+        (
+            Ellipsoid(
+                Vec3::new(0.030, 0.030, 0.018),
+                Vec3::new(0.085, 0.043, 0.050),
+            ),
+            0,
+        ),
+        (
+            Ellipsoid(
+                Vec3::new(0.030, -0.030, 0.018),
+                Vec3::new(0.085, 0.043, 0.050),
+            ),
+            0,
+        ),
+        (
+            Ellipsoid(Vec3::new(0.040, 0.0, 0.046), Vec3::new(0.070, 0.010, 0.020)),
+            0,
+        ),
+        (
+            Cone(
+                Vec3::new(0.085, 0.0, 0.0),
+                Vec3::new(0.128, 0.0, -0.004),
+                0.030,
+                0.019,
+            ),
+            0,
+        ),
+        (
+            Ellipsoid(
+                Vec3::new(-0.112, 0.0, -0.010),
+                Vec3::new(0.026, 0.030, 0.020),
+            ),
+            0,
+        ),
     ];
     for (s, base) in [(1.0f32, 1usize), (-1.0, 3)] {
         let p = side(s);
-        v.push((Cone(p.hip, p.knee, 0.036, 0.027), base));
-        v.push((Cone(p.knee, p.hock + (p.knee - p.hock) * 0.12, 0.025, 0.011), base + 1));
+        v.push((Cone(p.hip, p.knee, 0.038, 0.028), base));
+        v.push((
+            Cone(p.knee, p.hock + (p.knee - p.hock) * 0.12, 0.025, 0.011),
+            base + 1,
+        ));
         v.push((Ellipsoid(p.hock, Vec3::new(0.013, 0.012, 0.012)), base + 1));
     }
     for (s, base) in [(1.0f32, 5usize), (-1.0, 8)] {
@@ -238,10 +273,8 @@ pub fn generate(cell: f32) -> Mesh {
         })
         .collect();
     let normals: Vec<Vec3> = positions.par_iter().map(|&p| sdf.gradient(p)).collect();
-    let (vertex_joints, vertex_weights): (Vec<[u16; 4]>, Vec<[f32; 4]>) = positions
-        .par_iter()
-        .map(|&p| bone_weights(&sdf, p))
-        .unzip();
+    let (vertex_joints, vertex_weights): (Vec<[u16; 4]>, Vec<[f32; 4]>) =
+        positions.par_iter().map(|&p| bone_weights(&sdf, p)).unzip();
     let pivots = joint_pivots();
     let joints = JOINT_NAMES
         .iter()
@@ -416,8 +449,7 @@ pub fn write_default_asset(path: &std::path::Path) -> anyhow::Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
     }
-    std::fs::write(path, bytes)
-        .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
+    std::fs::write(path, bytes).map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
 }
 
 #[cfg(test)]

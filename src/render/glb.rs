@@ -31,7 +31,9 @@ pub enum GlbError {
     },
     #[error("carcass mesh {0}: not a valid glTF/GLB file: {1}")]
     Parse(String, gltf::Error),
-    #[error("carcass mesh {0}: primitive {1} of mesh {2:?} is {3:?}, only triangles are supported")]
+    #[error(
+        "carcass mesh {0}: primitive {1} of mesh {2:?} is {3:?}, only triangles are supported"
+    )]
     NotTriangles(String, usize, String, gltf::mesh::Mode),
     #[error("carcass mesh {0}: primitive {1} of mesh {2:?} has no POSITION attribute")]
     NoPositions(String, usize, String),
@@ -98,23 +100,34 @@ pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
         .for_each(|&p| to_gltf(p).iter().for_each(|&x| f32s(&mut b, x)));
     let pos = push(&mut bin, b, 5126, nv, "VEC3", Some(34962), Some((lo, hi)));
     let mut b = Vec::with_capacity(nv * 12);
-    mesh.normals
-        .iter()
-        .for_each(|&p| to_gltf(p.normalize_or(Vec3::Z)).iter().for_each(|&x| f32s(&mut b, x)));
+    mesh.normals.iter().for_each(|&p| {
+        to_gltf(p.normalize_or(Vec3::Z))
+            .iter()
+            .for_each(|&x| f32s(&mut b, x))
+    });
     let nor = push(&mut bin, b, 5126, nv, "VEC3", Some(34962), None);
     let mut b = Vec::with_capacity(mesh.indices.len() * 4);
     mesh.indices
         .iter()
         .for_each(|&i| b.extend_from_slice(&i.to_le_bytes()));
-    let idx = push(&mut bin, b, 5125, mesh.indices.len(), "SCALAR", Some(34963), None);
+    let idx = push(
+        &mut bin,
+        b,
+        5125,
+        mesh.indices.len(),
+        "SCALAR",
+        Some(34963),
+        None,
+    );
     let mut attributes = json!({"POSITION": pos, "NORMAL": nor});
     let mut nodes = vec![json!({"name": "carcass", "mesh": 0})];
     let mut skins = Vec::new();
     if let Some(skin) = &mesh.skin {
         let mut b = Vec::with_capacity(nv * 8);
-        skin.vertex_joints
-            .iter()
-            .for_each(|j| j.iter().for_each(|&x| b.extend_from_slice(&x.to_le_bytes())));
+        skin.vertex_joints.iter().for_each(|j| {
+            j.iter()
+                .for_each(|&x| b.extend_from_slice(&x.to_le_bytes()))
+        });
         let jo = push(&mut bin, b, 5123, nv, "VEC4", Some(34962), None);
         let mut b = Vec::with_capacity(nv * 16);
         skin.vertex_weights
@@ -148,7 +161,12 @@ pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
         }
         nodes[0]["skin"] = json!(0);
         let joints: Vec<usize> = (0..skin.joints.len()).map(|k| base + k).collect();
-        let root = skin.joints.iter().position(|j| j.parent.is_none()).unwrap_or(0) + base;
+        let root = skin
+            .joints
+            .iter()
+            .position(|j| j.parent.is_none())
+            .unwrap_or(0)
+            + base;
         skins.push(json!({"joints": joints, "inverseBindMatrices": ibm, "skeleton": root}));
     }
     while bin.len() % 4 != 0 {
@@ -253,10 +271,17 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
                 .collect();
             let base = positions.len() as u32;
             let n = pos.len();
-            positions.extend(pos.iter().map(|p| from_gltf(xf.transform_point3(Vec3::from(*p)).into())));
+            positions.extend(
+                pos.iter()
+                    .map(|p| from_gltf(xf.transform_point3(Vec3::from(*p)).into())),
+            );
             match reader.read_normals() {
                 Some(ns) => normals.extend(ns.map(|p| {
-                    from_gltf(xf.transform_vector3(Vec3::from(p)).normalize_or(Vec3::Y).into())
+                    from_gltf(
+                        xf.transform_vector3(Vec3::from(p))
+                            .normalize_or(Vec3::Y)
+                            .into(),
+                    )
                 })),
                 None => {
                     all_normals = false;
@@ -268,10 +293,15 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
                 None => (0..n as u32).collect(),
             };
             if idx.len() % 3 != 0 {
-                return Err(invalid(format!("primitive {pi} of mesh {mname:?} has {} indices, not a multiple of 3", idx.len())));
+                return Err(invalid(format!(
+                    "primitive {pi} of mesh {mname:?} has {} indices, not a multiple of 3",
+                    idx.len()
+                )));
             }
             if let Some(bad) = idx.iter().find(|&&i| i as usize >= n) {
-                return Err(invalid(format!("primitive {pi} of mesh {mname:?}: index {bad} out of range ({n} vertices)")));
+                return Err(invalid(format!(
+                    "primitive {pi} of mesh {mname:?}: index {bad} out of range ({n} vertices)"
+                )));
             }
             indices.extend(idx.iter().map(|i| i + base));
             if skinned {
@@ -284,12 +314,18 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
                     .map(|w| w.into_f32().collect())
                     .unwrap_or_else(|| vec![[1.0, 0.0, 0.0, 0.0]; n]);
                 if j.len() != n || w.len() != n {
-                    return Err(invalid(format!("primitive {pi}: JOINTS_0/WEIGHTS_0 count differs from POSITION")));
+                    return Err(invalid(format!(
+                        "primitive {pi}: JOINTS_0/WEIGHTS_0 count differs from POSITION"
+                    )));
                 }
                 vjoints.extend(j);
                 vweights.extend(w.into_iter().map(|w| {
                     let s: f32 = w.iter().sum();
-                    if s > 1e-6 { w.map(|x| x / s) } else { [1.0, 0.0, 0.0, 0.0] }
+                    if s > 1e-6 {
+                        w.map(|x| x / s)
+                    } else {
+                        [1.0, 0.0, 0.0, 0.0]
+                    }
                 }));
             } else if skin_doc.is_some() {
                 vjoints.extend(std::iter::repeat_n([0u16; 4], n));
@@ -316,10 +352,15 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
                 None => vec![Mat4::IDENTITY; joints.len()],
             };
             if ibms.len() != joints.len() {
-                return Err(invalid("skin: inverse bind matrix count differs from joint count".into()));
+                return Err(invalid(
+                    "skin: inverse bind matrix count differs from joint count".into(),
+                ));
             }
-            let node_to_joint: std::collections::HashMap<usize, usize> =
-                joints.iter().enumerate().map(|(k, n)| (n.index(), k)).collect();
+            let node_to_joint: std::collections::HashMap<usize, usize> = joints
+                .iter()
+                .enumerate()
+                .map(|(k, n)| (n.index(), k))
+                .collect();
             let mut parent = vec![None; joints.len()];
             for (k, n) in joints.iter().enumerate() {
                 for c in n.children() {
@@ -338,7 +379,10 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
                 })
                 .collect();
             if let Some(bad) = vjoints.iter().flatten().find(|&&j| j as usize >= out.len()) {
-                return Err(invalid(format!("skin: vertex joint index {bad} out of range ({} joints)", out.len())));
+                return Err(invalid(format!(
+                    "skin: vertex joint index {bad} out of range ({} joints)",
+                    out.len()
+                )));
             }
             Some(Skin {
                 joints: out,
@@ -386,13 +430,26 @@ mod tests {
         let normals = Mesh::compute_normals(&positions, &indices);
         let skin = skinned.then(|| Skin {
             joints: vec![
-                Joint { name: "body".into(), parent: None, pivot: Vec3::ZERO },
-                Joint { name: "hip_L".into(), parent: Some(0), pivot: Vec3::new(0.1, 0.05, 0.0) },
+                Joint {
+                    name: "body".into(),
+                    parent: None,
+                    pivot: Vec3::ZERO,
+                },
+                Joint {
+                    name: "hip_L".into(),
+                    parent: Some(0),
+                    pivot: Vec3::new(0.1, 0.05, 0.0),
+                },
             ],
             vertex_joints: vec![[0, 1, 0, 0]; 4],
             vertex_weights: vec![[0.75, 0.25, 0.0, 0.0]; 4],
         });
-        Mesh { positions, normals, indices, skin }
+        Mesh {
+            positions,
+            normals,
+            indices,
+            skin,
+        }
     }
 
     #[test]
@@ -419,10 +476,16 @@ mod tests {
 
     #[test]
     fn bad_inputs_are_errors() {
-        assert!(matches!(from_slice(b"not a glb", "x"), Err(GlbError::Parse(..))));
+        assert!(matches!(
+            from_slice(b"not a glb", "x"),
+            Err(GlbError::Parse(..))
+        ));
         let good = to_glb(&tetra(false)).unwrap();
         assert!(from_slice(&good[..good.len() / 2], "x").is_err());
-        assert!(matches!(load(Path::new("/nonexistent/c.glb")), Err(GlbError::Io { .. })));
+        assert!(matches!(
+            load(Path::new("/nonexistent/c.glb")),
+            Err(GlbError::Io { .. })
+        ));
         // Same file with the primitive switched to LINES (mode 1).
         let mut lines = good.clone();
         let at = lines.windows(8).position(|w| w == b"\"mode\":4").unwrap();
