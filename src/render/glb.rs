@@ -496,6 +496,16 @@ mod tests {
     }
 
     #[test]
+    fn committed_asset_matches_the_generator() {
+        // If this fails, run `cargo run --release --example gen_carcass` and commit.
+        let fresh = to_glb(&super::super::carcass::generate(
+            super::super::carcass::DEFAULT_CELL,
+        ))
+        .unwrap();
+        assert!(fresh == DEFAULT_CARCASS_GLB, "assets/carcass.glb is stale");
+    }
+
+    #[test]
     fn embedded_default_loads_skinned() {
         let m = default_carcass().unwrap();
         let s = m.skin.as_ref().unwrap();

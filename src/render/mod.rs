@@ -360,3 +360,147 @@ pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::R
         mean,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::coco::Segmentation;
+    use crate::data::polygon::rle_from_polygons;
+    use crate::data::rle::Rle;
+
+    fn small(size: u32) -> RenderOptions {
+        let mut o = RenderOptions::synthetic(size);
+        o.carcasses = [3, 6];
+        o
+    }
+
+    #[test]
+    fn same_seed_gives_byte_identical_files() {
+        let base = std::env::temp_dir().join(format!("ct-det-{}", std::process::id()));
+        let mut o = small(96);
+        o.count = 3;
+        o.seed = 42;
+        let (a, b) = (base.join("a"), base.join("b"));
+        render_dataset(&o, &a, false).unwrap();
+        // Second run on a one-thread pool: scheduling must not matter.
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| render_dataset(&o, &b, false))
+            .unwrap();
+        for f in [
+            "annotations.json",
+            "images/000000.jpg",
+            "images/000002.jpg",
+            "preview.png",
+        ] {
+            let (x, y) = (
+                std::fs::read(a.join(f)).unwrap(),
+                std::fs::read(b.join(f)).unwrap(),
+            );
+            assert!(x == y, "{f} differs between runs");
+        }
+        // A different seed gives different images.
+        o.seed = 43;
+        render_dataset(&o, &base.join("c"), false).unwrap();
+        assert_ne!(
+            std::fs::read(a.join("images/000000.jpg")).unwrap(),
+            std::fs::read(base.join("c/images/000000.jpg")).unwrap()
+        );
+        let _ = std::fs::remove_dir_all(&base);
+    }
+
+    #[test]
+    fn masks_are_the_id_buffer_and_polygons_agree_with_rle() {
+        let o = small(128);
+        let mut checked = 0;
+        for i in 0..4 {
+            let s = render_sample(&o, 7, i).unwrap();
+            let anns = export::annotations(&s.ids, 128, 128, &s.instances, 1, 1);
+            for (inst, ann) in s.instances.iter().zip(&anns) {
+                let Segmentation::Rle { counts, .. } = &ann.segmentation else {
+                    panic!()
+                };
+                let m = Rle::from_compressed(counts, 128, 128).unwrap().decode();
+                for (p, &id) in s.ids.iter().enumerate() {
+                    assert_eq!(
+                        m.data[p] != 0,
+                        id == inst.id,
+                        "pixel {p} of instance {}",
+                        inst.id
+                    );
+                }
+                assert_eq!(ann.area as u64, inst.visible_px);
+                assert!(inst.visible_px <= inst.amodal_px);
+                let polys: Vec<Vec<f64>> =
+                    serde_json::from_value(ann.extra["polygons"].clone()).unwrap();
+                let back = rle_from_polygons(&polys, 128, 128).decode();
+                let iou = back.iou(&m);
+                // Tiny sliver instances (ignored anyway) can lose more to polygon rounding.
+                if inst.visible_px >= 100 {
+                    assert!(iou >= 0.98, "polygon IoU {iou} for {} px", inst.visible_px);
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked >= 4, "only {checked} instances checked");
+    }
+
+    #[test]
+    fn dense_piles_overlap_and_isolated_ones_do_not() {
+        // Overlap = some instance has visib_fract < 0.9 (a tenth of it hidden). At the
+        // dense end (density >= 0.9: pile radius about half the carcasses' footprint, 2-3
+        // candidate spots per drop) stacking is forced, so nearly every image of 6+
+        // carcasses must show it; 8 of 10 leaves room for a pile near the border.
+        let mut dense = RenderOptions::synthetic(64);
+        dense.carcasses = [6, 12];
+        dense.density = [0.9, 1.0];
+        let overlapped = (0..10)
+            .filter(|&i| {
+                let s = render_sample(&dense, 1, i).unwrap();
+                s.instances.iter().any(|x| x.visib_fract < 0.9)
+            })
+            .count();
+        assert!(overlapped >= 8, "only {overlapped}/10 dense images overlap");
+        // Isolated, two carcasses: the drop picks free spots, so overlap is rare.
+        let mut iso = RenderOptions::synthetic(64);
+        iso.carcasses = [2, 2];
+        iso.density = [0.0, 0.0];
+        let overlapped = (0..10)
+            .filter(|&i| {
+                render_sample(&iso, 1, i)
+                    .unwrap()
+                    .instances
+                    .iter()
+                    .any(|x| x.visib_fract < 0.9)
+            })
+            .count();
+        assert!(overlapped <= 2, "{overlapped}/10 isolated images overlap");
+    }
+
+    #[test]
+    fn raster_primary_matches_traced_primary() {
+        let mut o = small(96);
+        let s1 = render_sample(&o, 3, 0).unwrap();
+        o.raster_primary = false;
+        let s2 = render_sample(&o, 3, 0).unwrap();
+        let same = s1.ids.iter().zip(&s2.ids).filter(|(a, b)| a == b).count();
+        assert!(
+            same as f64 >= 0.995 * s1.ids.len() as f64,
+            "{same} of {} ids agree",
+            s1.ids.len()
+        );
+    }
+
+    #[test]
+    fn bad_carcass_path_is_an_error_not_a_panic() {
+        let mut o = small(64);
+        o.carcass = Some("/nonexistent/carcass.glb".into());
+        let e = render_sample(&o, 0, 0).unwrap_err();
+        assert!(format!("{e:#}").contains("/nonexistent/carcass.glb"));
+        let mut o = small(64);
+        o.width = 0;
+        assert!(render_sample(&o, 0, 0).is_err());
+    }
+}

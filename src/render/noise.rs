@@ -139,7 +139,7 @@ mod tests {
 
     #[test]
     fn noise_is_bounded_continuous_and_seeded() {
-        let mut prev = value3(1, Vec3::ZERO);
+        let mut prev = value3(1, Vec3::new(0.0, 0.3, -0.7));
         for i in 1..500 {
             let p = Vec3::new(i as f32 * 0.01, 0.3, -0.7);
             let v = value3(1, p);

@@ -268,7 +268,11 @@ fn read_cached(path: &Path) -> Result<RenderedSample> {
         bail!("cached id buffer size mismatch");
     }
     let n = u32_(take(4)?) as usize;
-    let instances: Vec<InstanceLabel> = serde_json::from_slice(take(n)?)?;
+    let mut instances: Vec<InstanceLabel> = serde_json::from_slice(take(n)?)?;
+    // JSON does not round-trip every f64 bit; recompute the ratio exactly as rendered.
+    for i in &mut instances {
+        i.visib_fract = i.visible_px as f64 / i.amodal_px.max(1) as f64;
+    }
     Ok(RenderedSample {
         image,
         ids,

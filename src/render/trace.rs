@@ -631,7 +631,8 @@ mod tests {
         assert!(tr
             .closest(Vec3::new(-1.0, 0.0, 0.1), Vec3::X, 10.0)
             .map_or(true, |h| h.0.is_finite()));
-        assert!(!tr.unoccluded(Vec3::new(0.0, 0.0, 0.0), Vec3::Z, 1.0));
+        assert!(!tr.unoccluded(Vec3::new(0.03, -0.02, 0.0), Vec3::Z, 1.0));
+        assert!(tr.unoccluded(Vec3::new(0.03, -0.02, 0.0), Vec3::Z, 0.05));
         assert!(tr.unoccluded(Vec3::new(0.3, 0.0, 0.0), Vec3::Z, 1.0));
         // Empty geometry never hits.
         let empty = Tracer::build(&Geometry::default());
