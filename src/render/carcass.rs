@@ -65,9 +65,9 @@ struct Side {
 
 fn side(s: f32) -> Side {
     Side {
-        hip: Vec3::new(-0.035, s * 0.052, -0.012),
-        knee: Vec3::new(0.000, s * 0.085, 0.026),
-        hock: Vec3::new(-0.108, s * 0.058, 0.048),
+        hip: Vec3::new(-0.032, s * 0.048, -0.008),
+        knee: Vec3::new(0.004, s * 0.072, 0.032),
+        hock: Vec3::new(-0.112, s * 0.036, 0.056),
         shoulder: Vec3::new(0.068, s * 0.058, 0.004),
         elbow: Vec3::new(0.012, s * 0.098, -0.018),
         wrist: Vec3::new(0.082, s * 0.104, -0.030),
@@ -153,17 +153,25 @@ fn prims() -> Vec<(Prim, usize)> {
     for (s, base) in [(1.0f32, 1usize), (-1.0, 3)] {
         let p = side(s);
         v.push((Cone(p.hip, p.knee, 0.038, 0.028), base));
-        v.push((
-            Cone(p.knee, p.hock + (p.knee - p.hock) * 0.12, 0.025, 0.011),
-            base + 1,
-        ));
+        // Drumstick: the muscle swells below the knee, then tapers to the bare shank.
+        let m1 = p.knee + (p.hock - p.knee) * 0.3;
+        let m2 = p.knee + (p.hock - p.knee) * 0.88;
+        v.push((Cone(p.knee, m1, 0.025, 0.028), base + 1));
+        v.push((Cone(m1, m2, 0.028, 0.0095), base + 1));
         v.push((Ellipsoid(p.hock, Vec3::new(0.013, 0.012, 0.012)), base + 1));
     }
     for (s, base) in [(1.0f32, 5usize), (-1.0, 8)] {
         let p = side(s);
-        v.push((Cone(p.shoulder, p.elbow, 0.020, 0.013), base));
-        v.push((Cone(p.elbow, p.wrist, 0.013, 0.010), base + 1));
-        v.push((Cone(p.wrist, p.tip, 0.010, 0.005), base + 2));
+        v.push((Cone(p.shoulder, p.elbow, 0.021, 0.014), base));
+        // The flat and the tip are flat: two parallel cones side by side in the wing plane.
+        let flat =
+            |a: Vec3, b: Vec3, half: f32| (b - a).cross(Vec3::Z).normalize_or(Vec3::X) * half;
+        let o = flat(p.elbow, p.wrist, 0.006);
+        v.push((Cone(p.elbow + o, p.wrist + o * 0.6, 0.012, 0.009), base + 1));
+        v.push((Cone(p.elbow - o, p.wrist - o * 0.6, 0.012, 0.009), base + 1));
+        let o = flat(p.wrist, p.tip, 0.005);
+        v.push((Cone(p.wrist + o, p.tip, 0.009, 0.004), base + 2));
+        v.push((Cone(p.wrist - o, p.tip, 0.009, 0.004), base + 2));
     }
     v
 }

@@ -24,6 +24,8 @@ pub struct Surface {
     pub wrap: f32,
     /// Colour of light that scattered under the skin (the wrapped part).
     pub sss_tint: Vec3,
+    /// Wet film: a second, sharp specular lobe (F0 at normal incidence; 0 = none).
+    pub coat: f32,
 }
 
 /// Per-carcass skin parameters.
@@ -57,9 +59,9 @@ pub fn srgb8(r: u8, g: u8, b: u8) -> Vec3 {
 impl SkinMaterial {
     pub fn sample<R: Rng>(rng: &mut R, yellow: [f32; 2]) -> SkinMaterial {
         // Cream-pink (white-skinned broilers) to yellow (corn-fed), sampled between the two.
-        let pink = srgb8(240, 206, 190);
+        let pink = srgb8(242, 204, 184);
         let cream = srgb8(246, 222, 192);
-        let yel = srgb8(242, 204, 128);
+        let yel = srgb8(246, 198, 118);
         let y = rng.random_range(yellow[0]..=yellow[1]);
         let base = if y < 0.5 {
             pink.lerp(cream, y * 2.0)
@@ -72,7 +74,7 @@ impl SkinMaterial {
             seed: rng.random(),
             follicle_freq: rng.random_range(220.0..320.0),
             follicle_bump: rng.random_range(0.15..0.35),
-            roughness: rng.random_range(0.14..0.3),
+            roughness: rng.random_range(0.22..0.4),
             wet: rng.random_range(0.035..0.06),
             wrap: rng.random_range(0.35..0.6),
             blotch: rng.random_range(0.0..0.35),
@@ -104,6 +106,7 @@ impl SkinMaterial {
             metallic: 0.0,
             wrap: self.wrap,
             sss_tint: Vec3::new(1.0, 0.42, 0.32),
+            coat: self.wet * 0.4,
         }
     }
 }
@@ -139,7 +142,13 @@ pub enum Background {
 }
 
 impl Background {
-    pub fn sample<R: Rng>(rng: &mut R, p_belt: f32, p_stains: f32, extent: f32) -> Background {
+    pub fn sample<R: Rng>(
+        rng: &mut R,
+        p_belt: f32,
+        p_stains: f32,
+        steel_roughness: [f32; 2],
+        extent: f32,
+    ) -> Background {
         let a = rng.random_range(0.0..std::f32::consts::TAU);
         let dir = Vec2::new(a.cos(), a.sin());
         let mut stains = Vec::new();
@@ -170,7 +179,11 @@ impl Background {
         } else {
             Background::Steel {
                 f0: srgb8(196, 199, 202) * rng.random_range(0.9..1.05),
-                roughness: rng.random_range(0.18..0.4),
+                roughness: if steel_roughness[1] > steel_roughness[0] {
+                    rng.random_range(steel_roughness[0]..steel_roughness[1])
+                } else {
+                    steel_roughness[0]
+                },
                 brush: dir,
                 seed: rng.random(),
                 stains,
@@ -207,8 +220,9 @@ impl Background {
                 let along = q.dot(*brush);
                 let across = q.dot(brush.perp());
                 // Brushed: fine streaks across the brushing direction, stretched along it.
-                let streak = value2(*seed, across * 2500.0, along * 12.0) * 0.6
-                    + value2(*seed ^ 1, across * 600.0, along * 4.0) * 0.4;
+                // Streak widths ~1-4 mm: at ~1 mm per pixel finer ones would average away.
+                let streak = value2(*seed, across * 700.0, along * 6.0) * 0.5
+                    + value2(*seed ^ 1, across * 220.0, along * 3.0) * 0.5;
                 let smudge = fbm2(*seed ^ 2, q.x * 6.0, q.y * 6.0, 3);
                 let (stain, blood) = Self::stain_at(stains, q);
                 let mut f0 = *f0 * (0.86 + 0.2 * streak) * (0.92 + 0.12 * smudge);
@@ -217,8 +231,8 @@ impl Background {
                 let mut albedo = Vec3::splat(0.02);
                 if stain > 0.0 {
                     if blood {
-                        f0 = f0.lerp(f0 * Vec3::new(0.75, 0.35, 0.32), stain * 0.8);
-                        albedo = albedo.lerp(Vec3::new(0.25, 0.02, 0.02), stain * 0.5);
+                        f0 = f0.lerp(f0 * Vec3::new(0.8, 0.5, 0.48), stain * 0.45);
+                        albedo = albedo.lerp(Vec3::new(0.2, 0.03, 0.03), stain * 0.25);
                     } else {
                         f0 *= 1.0 - 0.12 * stain;
                     }
@@ -232,6 +246,7 @@ impl Background {
                     metallic: 1.0,
                     wrap: 0.0,
                     sss_tint: Vec3::ONE,
+                    coat: 0.0,
                 }
             }
             Background::Belt {
@@ -270,6 +285,7 @@ impl Background {
                     metallic: 0.0,
                     wrap: 0.0,
                     sss_tint: Vec3::ONE,
+                    coat: 0.0,
                 }
             }
         }
@@ -296,7 +312,7 @@ mod tests {
             let red = m.surface(Vec3::new(0.01, 0.02, 0.03), Vec3::Z, 1.0);
             assert!(red.albedo.y / red.albedo.x < s.albedo.y / s.albedo.x);
         }
-        let bg = Background::sample(&mut rng, 0.0, 0.0, 0.5);
+        let bg = Background::sample(&mut rng, 0.0, 0.0, [0.2, 0.4], 0.5);
         let s = bg.surface(Vec3::new(0.1, 0.2, 0.0));
         assert_eq!(s.metallic, 1.0);
         assert!(s.roughness >= 0.08 && s.roughness <= 0.6);

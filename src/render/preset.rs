@@ -3,8 +3,9 @@
 //! * `synthetic`: the paper's rendered domain, widely randomised (light, exposure, white
 //!   balance, camera, poses, density isolated → overlapped, belt and stains sometimes).
 //! * `proxy-real`: a PROXY for the paper's 300 real photographs, which are not available.
-//!   It is a distinct, more photographic domain: a fixed studio rig (large soft box nearly
-//!   overhead, neutral-warm light), a longer lens from higher up with less tilt, stronger
+//!   It is a distinct, more photographic domain: a fixed studio rig (a large soft box to
+//!   one side at about 45°, out of the steel's mirror view; neutral-warm light; matte
+//!   2B-finish steel), a longer lens from higher up with less tilt, stronger
 //!   sensor noise, blur and JPEG compression, a camera white-balance error, steel only,
 //!   narrower shape ranges, and its own seed space. It stands in for real data in
 //!   experiments and is called a proxy wherever it appears; real LabelMe/COCO data
@@ -56,8 +57,9 @@ pub struct RenderOptions {
     pub tilt_max_deg: f32,
     pub light_height: [f32; 2],
     pub light_size: [f32; 2],
-    /// Horizontal offset of the key light from the view centre (m).
-    pub light_offset: f32,
+    /// Horizontal offset range of the key light from the view centre (m). Offsets
+    /// beyond about half the view keep the soft box's mirror image off the steel.
+    pub light_offset: [f32; 2],
     pub light_kelvin: [f32; 2],
     /// Room ambient relative to the key light.
     pub ambient: [f32; 2],
@@ -70,6 +72,8 @@ pub struct RenderOptions {
     pub jpeg_quality: [u8; 2],
     pub p_belt: f32,
     pub p_stains: f32,
+    /// Roughness range of the stainless plate (0.2 polished … 0.5 matte 2B finish).
+    pub steel_roughness: [f32; 2],
     /// Shadow rays per pixel (stratified over the area light).
     pub shadow_samples: u32,
     /// Radius of the edge-aware shadow-visibility filter in pixels (0 = off).
@@ -103,7 +107,7 @@ impl RenderOptions {
             tilt_max_deg: 10.0,
             light_height: [0.9, 2.0],
             light_size: [0.3, 1.2],
-            light_offset: 0.8,
+            light_offset: [0.4, 1.4],
             light_kelvin: [3200.0, 6800.0],
             ambient: [0.15, 0.6],
             exposure_ev: [-0.5, 0.5],
@@ -115,6 +119,7 @@ impl RenderOptions {
             jpeg_quality: [85, 95],
             p_belt: 0.15,
             p_stains: 0.35,
+            steel_roughness: [0.18, 0.45],
             shadow_samples: 1,
             shadow_filter_px: 4,
             reflections: true,
@@ -145,9 +150,9 @@ impl RenderOptions {
             camera_height: [1.15, 1.35],
             fov_deg: [34.0, 40.0],
             tilt_max_deg: 4.0,
-            light_height: [1.4, 1.6],
+            light_height: [1.3, 1.5],
             light_size: [0.9, 1.1],
-            light_offset: 0.25,
+            light_offset: [1.3, 1.6],
             light_kelvin: [4300.0, 5000.0],
             ambient: [0.3, 0.4],
             exposure_ev: [-0.2, 0.3],
@@ -158,6 +163,7 @@ impl RenderOptions {
             jpeg_quality: [70, 85],
             p_belt: 0.0,
             p_stains: 0.2,
+            steel_roughness: [0.35, 0.5],
             ..RenderOptions::synthetic(size)
         }
     }
@@ -202,7 +208,7 @@ impl RenderOptions {
             "carcasses range {:?} must be 1 <= lo <= hi <= 64",
             self.carcasses
         );
-        let ranges: [(&str, [f32; 2], f32, f32); 14] = [
+        let ranges: [(&str, [f32; 2], f32, f32); 15] = [
             ("density", self.density, 0.0, 1.0),
             ("skin_yellow", self.skin_yellow, 0.0, 1.0),
             ("camera_height", self.camera_height, 0.3, 5.0),
@@ -217,6 +223,7 @@ impl RenderOptions {
             ("shot_noise", self.shot_noise, 0.0, 0.5),
             ("pose.scale", self.pose.scale, 0.5, 2.0),
             ("pose.displacement_mm", self.pose.displacement_mm, 0.0, 20.0),
+            ("steel_roughness", self.steel_roughness, 0.05, 1.0),
         ];
         for (name, r, lo, hi) in ranges {
             ensure!(
@@ -259,10 +266,15 @@ impl RenderOptions {
             "pile_offset must be in [0, 2]"
         );
         ensure!(
-            self.light_offset >= 0.0
-                && self.white_balance_jitter >= 0.0
-                && self.white_balance_jitter < 0.5,
-            "light_offset must be >= 0 and white_balance_jitter in [0, 0.5)"
+            self.light_offset[0] >= 0.0
+                && self.light_offset[0] <= self.light_offset[1]
+                && self.light_offset[1] <= 10.0,
+            "light_offset range {:?} must be ordered within [0, 10]",
+            self.light_offset
+        );
+        ensure!(
+            self.white_balance_jitter >= 0.0 && self.white_balance_jitter < 0.5,
+            "white_balance_jitter must be in [0, 0.5)"
         );
         Ok(())
     }

@@ -166,7 +166,7 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
     let lh = uni(rng, opts.light_height);
     let size = uni(rng, opts.light_size);
     let a = rng.random_range(0.0..std::f32::consts::TAU);
-    let off = Vec2::new(a.cos(), a.sin()) * rng.random_range(0.0..opts.light_offset.max(1e-6));
+    let off = Vec2::new(a.cos(), a.sin()) * uni(rng, opts.light_offset);
     let lc = look_at + off;
     let la = rng.random_range(0.0..std::f32::consts::TAU);
     let aspect = rng.random_range(0.5..1.0);
@@ -193,12 +193,18 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
         v,
         color,
     };
-    let background = Background::sample(rng, opts.p_belt, opts.p_stains, half_view * 1.5);
+    let background = Background::sample(
+        rng,
+        opts.p_belt,
+        opts.p_stains,
+        opts.steel_roughness,
+        half_view * 1.5,
+    );
 
     let wbj = opts.white_balance_jitter;
     let sensor = Sensor {
         exposure_ev: uni(rng, opts.exposure_ev),
-        target: 0.16,
+        target: 0.2,
         wb: Vec3::new(
             1.0 + rng.random_range(-wbj..=wbj),
             1.0,

@@ -320,14 +320,20 @@ impl Tracer {
                 * (1.0 - s.metallic)
                 * (Vec3::splat(lambert) + (wrapped - lambert) * s.sss_tint)
                 / std::f32::consts::PI;
-            let spec = if lambert > 0.0 {
-                ggx(n, v, l, s.roughness, s.f0) * lambert
-            } else {
-                Vec3::ZERO
-            };
-            direct += e * (diffuse + spec);
+            direct += e * diffuse;
         }
         direct *= light.area() / ns as f32;
+        // Specular: the soft box mirrored in the surface, blurred by the lobe width (a
+        // smooth "window" highlight instead of sparse one-sample sparkles).
+        let r = reflect(-v, n);
+        let fr = schlick(s.f0, n.dot(v).max(0.0));
+        let mut spec = fr * light.color * light_coverage(light, p, r, s.roughness);
+        if s.coat > 0.0 {
+            spec += schlick(Vec3::splat(s.coat), n.dot(v).max(0.0))
+                * light.color
+                * light_coverage(light, p, r, 0.1);
+        }
+        direct += spec;
         let vis = if tried == 0 {
             1.0
         } else {
@@ -336,7 +342,6 @@ impl Tracer {
         let amb = look.env.ambient * (0.55 + 0.45 * n.z.max(-1.0));
         let ambient = s.albedo * (1.0 - s.metallic) * amb;
         // Specular of the room for dielectrics (wet sheen); metals get a traced reflection.
-        let r = reflect(-v, n);
         let env_spec = if s.metallic < 0.5 {
             schlick(s.f0, n.dot(v).max(0.0)) * look.env.radiance(r) * (1.0 - s.roughness)
         } else if !look.reflections {
@@ -563,6 +568,29 @@ fn box_blur(src: &[f32], w: usize, h: usize, r: usize, horizontal: bool) -> Vec<
     out
 }
 
+/// Fraction of a specular lobe around direction `r` (from `p`) that lands on the
+/// rectangular light: the lobe's footprint on the light plane is a square of half-width
+/// 2·α·distance, and the fraction is the box-box overlap per axis. Normalised, so rough
+/// surfaces spread the mirror image wider and dimmer instead of just wider.
+fn light_coverage(light: &AreaLight, p: Vec3, r: Vec3, roughness: f32) -> f32 {
+    if r.z <= 1e-4 {
+        return 0.0;
+    }
+    let t = (light.centre.z - p.z) / r.z;
+    if t <= 0.0 {
+        return 0.0;
+    }
+    let q = p + r * t - light.centre;
+    let (ul, vl) = (light.u.length(), light.v.length());
+    let x = q.dot(light.u) / ul;
+    let y = q.dot(light.v) / vl;
+    let alpha = (roughness * roughness).max(0.002);
+    let w = 2.0 * alpha * t + 0.002;
+    let f =
+        |x: f32, half: f32| (((x + w).min(half) - (x - w).max(-half)) / (2.0 * w)).clamp(0.0, 1.0);
+    f(x, ul) * f(y, vl)
+}
+
 #[inline]
 fn reflect(d: Vec3, n: Vec3) -> Vec3 {
     d - n * 2.0 * d.dot(n)
@@ -573,22 +601,6 @@ fn schlick(f0: Vec3, cos: f32) -> Vec3 {
     let m = (1.0 - cos).clamp(0.0, 1.0);
     let m2 = m * m;
     f0 + (Vec3::ONE - f0) * (m2 * m2 * m)
-}
-
-/// GGX microfacet specular BRDF (without the cosine), Smith-Schlick visibility.
-#[inline]
-fn ggx(n: Vec3, v: Vec3, l: Vec3, roughness: f32, f0: Vec3) -> Vec3 {
-    let h = (v + l).normalize_or_zero();
-    let ndh = n.dot(h).max(0.0);
-    let ndv = n.dot(v).max(1e-4);
-    let ndl = n.dot(l).max(1e-4);
-    let a = (roughness * roughness).max(1e-3);
-    let a2 = a * a;
-    let dd = ndh * ndh * (a2 - 1.0) + 1.0;
-    let dist = a2 / (std::f32::consts::PI * dd * dd);
-    let k = a * 0.5;
-    let vis = 1.0 / ((ndv * (1.0 - k) + k) * (ndl * (1.0 - k) + k) * 4.0);
-    schlick(f0, v.dot(h).max(0.0)) * dist * vis
 }
 
 #[cfg(test)]
