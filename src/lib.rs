@@ -8,4 +8,5 @@ pub mod cli;
 pub mod config;
 pub mod data;
 pub mod eval;
+pub mod render;
 pub mod util;

@@ -1,0 +1,516 @@
+//! Reading and writing carcass meshes as binary glTF (.glb).
+//!
+//! Writing: the generator's skinned mesh becomes one skinned mesh node plus a joint
+//! hierarchy (node names = joint names, inverse bind matrices = translate(-pivot)). The
+//! JSON is built with serde_json and packed by hand: simpler to audit than gltf_json's
+//! builder, and `gltf` itself validates it when read back.
+//!
+//! Reading goes through `gltf::import_slice`: every triangle primitive of every mesh
+//! node in the default scene is baked into one mesh in the carcass frame; the first skin
+//! found supplies joints (pivot = translation of the inverse of the inverse bind matrix).
+//! Rigid meshes are fine. Errors (not panics) for malformed files, non-triangle
+//! primitives, missing positions and absurd sizes.
+//!
+//! glTF is +Y up, +Z forward; the carcass frame is +Z up (breast), +X forward (neck):
+//! carcass (x, y, z) = glTF (z, x, y), a cyclic permutation, i.e. a proper rotation.
+
+use std::path::Path;
+
+use glam::{Mat4, Vec3};
+use serde_json::json;
+
+use super::mesh::{Joint, Mesh, Skin};
+
+/// Errors loading a carcass .glb.
+#[derive(Debug, thiserror::Error)]
+pub enum GlbError {
+    #[error("cannot read carcass mesh {path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("carcass mesh {0}: not a valid glTF/GLB file: {1}")]
+    Parse(String, gltf::Error),
+    #[error(
+        "carcass mesh {0}: primitive {1} of mesh {2:?} is {3:?}, only triangles are supported"
+    )]
+    NotTriangles(String, usize, String, gltf::mesh::Mode),
+    #[error("carcass mesh {0}: primitive {1} of mesh {2:?} has no POSITION attribute")]
+    NoPositions(String, usize, String),
+    #[error("carcass mesh {0}: {1}")]
+    Invalid(String, String),
+}
+
+fn to_gltf(p: Vec3) -> [f32; 3] {
+    [p.y, p.z, p.x]
+}
+
+fn from_gltf(p: [f32; 3]) -> Vec3 {
+    Vec3::new(p[2], p[0], p[1])
+}
+
+/// Serialises a mesh (skinned or rigid) to .glb bytes.
+pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
+    let nv = mesh.positions.len();
+    anyhow::ensure!(nv > 0 && mesh.indices.len() >= 3, "mesh is empty");
+    let mut bin: Vec<u8> = Vec::new();
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    // Appends a buffer view + accessor; returns the accessor index.
+    let mut push = |bin: &mut Vec<u8>,
+                    bytes: Vec<u8>,
+                    ctype: u32,
+                    count: usize,
+                    ty: &str,
+                    target: Option<u32>,
+                    minmax: Option<([f32; 3], [f32; 3])>| {
+        while bin.len() % 4 != 0 {
+            bin.push(0);
+        }
+        let mut view = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
+        if let Some(t) = target {
+            view["target"] = json!(t);
+        }
+        bin.extend_from_slice(&bytes);
+        views.push(view);
+        let mut acc = json!({"bufferView": views.len() - 1, "componentType": ctype,
+                             "count": count, "type": ty});
+        if let Some((lo, hi)) = minmax {
+            acc["min"] = json!(lo);
+            acc["max"] = json!(hi);
+        }
+        accessors.push(acc);
+        accessors.len() - 1
+    };
+    let f32s = |v: &mut Vec<u8>, x: f32| v.extend_from_slice(&x.to_le_bytes());
+    let (lo, hi) = mesh.positions.iter().fold(
+        ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]),
+        |(mut lo, mut hi), &p| {
+            let g = to_gltf(p);
+            for k in 0..3 {
+                lo[k] = lo[k].min(g[k]);
+                hi[k] = hi[k].max(g[k]);
+            }
+            (lo, hi)
+        },
+    );
+    let mut b = Vec::with_capacity(nv * 12);
+    mesh.positions
+        .iter()
+        .for_each(|&p| to_gltf(p).iter().for_each(|&x| f32s(&mut b, x)));
+    let pos = push(&mut bin, b, 5126, nv, "VEC3", Some(34962), Some((lo, hi)));
+    let mut b = Vec::with_capacity(nv * 12);
+    mesh.normals.iter().for_each(|&p| {
+        to_gltf(p.normalize_or(Vec3::Z))
+            .iter()
+            .for_each(|&x| f32s(&mut b, x))
+    });
+    let nor = push(&mut bin, b, 5126, nv, "VEC3", Some(34962), None);
+    let mut b = Vec::with_capacity(mesh.indices.len() * 4);
+    mesh.indices
+        .iter()
+        .for_each(|&i| b.extend_from_slice(&i.to_le_bytes()));
+    let idx = push(
+        &mut bin,
+        b,
+        5125,
+        mesh.indices.len(),
+        "SCALAR",
+        Some(34963),
+        None,
+    );
+    let mut attributes = json!({"POSITION": pos, "NORMAL": nor});
+    let mut nodes = vec![json!({"name": "carcass", "mesh": 0})];
+    let mut skins = Vec::new();
+    if let Some(skin) = &mesh.skin {
+        let mut b = Vec::with_capacity(nv * 8);
+        skin.vertex_joints.iter().for_each(|j| {
+            j.iter()
+                .for_each(|&x| b.extend_from_slice(&x.to_le_bytes()))
+        });
+        let jo = push(&mut bin, b, 5123, nv, "VEC4", Some(34962), None);
+        let mut b = Vec::with_capacity(nv * 16);
+        skin.vertex_weights
+            .iter()
+            .for_each(|w| w.iter().for_each(|&x| f32s(&mut b, x)));
+        let we = push(&mut bin, b, 5126, nv, "VEC4", Some(34962), None);
+        attributes["JOINTS_0"] = json!(jo);
+        attributes["WEIGHTS_0"] = json!(we);
+        let mut b = Vec::new();
+        for j in &skin.joints {
+            let ibm = Mat4::from_translation(-Vec3::from(to_gltf(j.pivot)));
+            ibm.to_cols_array().iter().for_each(|&x| f32s(&mut b, x));
+        }
+        let ibm = push(&mut bin, b, 5126, skin.joints.len(), "MAT4", None, None);
+        let base = nodes.len();
+        for (i, j) in skin.joints.iter().enumerate() {
+            let parent_pivot = j.parent.map(|p| skin.joints[p].pivot).unwrap_or(Vec3::ZERO);
+            let children: Vec<usize> = skin
+                .joints
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.parent == Some(i))
+                .map(|(k, _)| base + k)
+                .collect();
+            let mut node = json!({"name": j.name,
+                                  "translation": to_gltf(j.pivot - parent_pivot)});
+            if !children.is_empty() {
+                node["children"] = json!(children);
+            }
+            nodes.push(node);
+        }
+        nodes[0]["skin"] = json!(0);
+        let joints: Vec<usize> = (0..skin.joints.len()).map(|k| base + k).collect();
+        let root = skin
+            .joints
+            .iter()
+            .position(|j| j.parent.is_none())
+            .unwrap_or(0)
+            + base;
+        skins.push(json!({"joints": joints, "inverseBindMatrices": ibm, "skeleton": root}));
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let mut scene_nodes = vec![0usize];
+    if let Some(skin) = &mesh.skin {
+        for (k, j) in skin.joints.iter().enumerate() {
+            if j.parent.is_none() {
+                scene_nodes.push(1 + k);
+            }
+        }
+    }
+    let mut root = json!({
+        "asset": {"version": "2.0", "generator": "chicktrain procedural carcass"},
+        "scene": 0,
+        "scenes": [{"nodes": scene_nodes}],
+        "nodes": nodes,
+        "meshes": [{"name": "carcass", "primitives": [{"attributes": attributes,
+                     "indices": idx, "mode": 4}]}],
+        "buffers": [{"byteLength": bin.len()}],
+        "bufferViews": views,
+        "accessors": accessors,
+    });
+    if !skins.is_empty() {
+        root["skins"] = json!(skins);
+    }
+    let mut text = serde_json::to_vec(&root)?;
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let total = 12 + 8 + text.len() + 8 + bin.len();
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&text);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin);
+    Ok(out)
+}
+
+/// Loads a carcass mesh from a .glb/.gltf file.
+pub fn load(path: &Path) -> Result<Mesh, GlbError> {
+    let bytes = std::fs::read(path).map_err(|source| GlbError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    from_slice(&bytes, &path.display().to_string())
+}
+
+/// Parses .glb bytes; `name` is used in error messages.
+pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
+    let name = name.to_string();
+    let (doc, buffers, _) =
+        gltf::import_slice(bytes).map_err(|e| GlbError::Parse(name.clone(), e))?;
+    let invalid = |msg: String| GlbError::Invalid(name.clone(), msg);
+    let scene = doc
+        .default_scene()
+        .or_else(|| doc.scenes().next())
+        .ok_or_else(|| invalid("no scene".into()))?;
+    // Walk the scene graph collecting (node, world transform) of mesh nodes.
+    let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    let mut mesh_nodes = Vec::new();
+    while let Some((node, parent)) = stack.pop() {
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        if node.mesh().is_some() {
+            mesh_nodes.push((node.clone(), world));
+        }
+        for c in node.children() {
+            stack.push((c, world));
+        }
+    }
+    mesh_nodes.sort_by_key(|(n, _)| n.index());
+    if mesh_nodes.is_empty() {
+        return Err(invalid("the default scene has no mesh".into()));
+    }
+    let skin_doc = mesh_nodes.iter().find_map(|(n, _)| n.skin());
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    let mut indices = Vec::new();
+    let mut vjoints = Vec::new();
+    let mut vweights = Vec::new();
+    let mut all_normals = true;
+    for (node, world) in &mesh_nodes {
+        let m = node.mesh().expect("filtered above");
+        let mname = m.name().unwrap_or("").to_string();
+        // Skinned meshes ignore their node transform (glTF spec); rigid ones use it.
+        let skinned = node.skin().is_some() && skin_doc.is_some();
+        let xf = if skinned { Mat4::IDENTITY } else { *world };
+        for (pi, prim) in m.primitives().enumerate() {
+            if prim.mode() != gltf::mesh::Mode::Triangles {
+                return Err(GlbError::NotTriangles(name.clone(), pi, mname, prim.mode()));
+            }
+            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+            let pos: Vec<[f32; 3]> = reader
+                .read_positions()
+                .ok_or_else(|| GlbError::NoPositions(name.clone(), pi, mname.clone()))?
+                .collect();
+            let base = positions.len() as u32;
+            let n = pos.len();
+            positions.extend(
+                pos.iter()
+                    .map(|p| from_gltf(xf.transform_point3(Vec3::from(*p)).into())),
+            );
+            match reader.read_normals() {
+                Some(ns) => normals.extend(ns.map(|p| {
+                    from_gltf(
+                        xf.transform_vector3(Vec3::from(p))
+                            .normalize_or(Vec3::Y)
+                            .into(),
+                    )
+                })),
+                None => {
+                    all_normals = false;
+                    normals.extend(std::iter::repeat_n(Vec3::Z, n));
+                }
+            }
+            let idx: Vec<u32> = match reader.read_indices() {
+                Some(i) => i.into_u32().collect(),
+                None => (0..n as u32).collect(),
+            };
+            if idx.len() % 3 != 0 {
+                return Err(invalid(format!(
+                    "primitive {pi} of mesh {mname:?} has {} indices, not a multiple of 3",
+                    idx.len()
+                )));
+            }
+            if let Some(bad) = idx.iter().find(|&&i| i as usize >= n) {
+                return Err(invalid(format!(
+                    "primitive {pi} of mesh {mname:?}: index {bad} out of range ({n} vertices)"
+                )));
+            }
+            indices.extend(idx.iter().map(|i| i + base));
+            if skinned {
+                let j: Vec<[u16; 4]> = reader
+                    .read_joints(0)
+                    .map(|j| j.into_u16().collect())
+                    .unwrap_or_else(|| vec![[0; 4]; n]);
+                let w: Vec<[f32; 4]> = reader
+                    .read_weights(0)
+                    .map(|w| w.into_f32().collect())
+                    .unwrap_or_else(|| vec![[1.0, 0.0, 0.0, 0.0]; n]);
+                if j.len() != n || w.len() != n {
+                    return Err(invalid(format!(
+                        "primitive {pi}: JOINTS_0/WEIGHTS_0 count differs from POSITION"
+                    )));
+                }
+                vjoints.extend(j);
+                vweights.extend(w.into_iter().map(|w| {
+                    let s: f32 = w.iter().sum();
+                    if s > 1e-6 {
+                        w.map(|x| x / s)
+                    } else {
+                        [1.0, 0.0, 0.0, 0.0]
+                    }
+                }));
+            } else if skin_doc.is_some() {
+                vjoints.extend(std::iter::repeat_n([0u16; 4], n));
+                vweights.extend(std::iter::repeat_n([1.0f32, 0.0, 0.0, 0.0], n));
+            }
+        }
+    }
+    if indices.is_empty() {
+        return Err(invalid("no triangles".into()));
+    }
+    if positions.iter().any(|p| !p.is_finite()) {
+        return Err(invalid("non-finite vertex positions".into()));
+    }
+    if !all_normals {
+        normals = Mesh::compute_normals(&positions, &indices);
+    }
+    let skin = match skin_doc {
+        None => None,
+        Some(skin) => {
+            let reader = skin.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+            let joints: Vec<gltf::Node> = skin.joints().collect();
+            let ibms: Vec<Mat4> = match reader.read_inverse_bind_matrices() {
+                Some(m) => m.map(|m| Mat4::from_cols_array_2d(&m)).collect(),
+                None => vec![Mat4::IDENTITY; joints.len()],
+            };
+            if ibms.len() != joints.len() {
+                return Err(invalid(
+                    "skin: inverse bind matrix count differs from joint count".into(),
+                ));
+            }
+            let node_to_joint: std::collections::HashMap<usize, usize> = joints
+                .iter()
+                .enumerate()
+                .map(|(k, n)| (n.index(), k))
+                .collect();
+            let mut parent = vec![None; joints.len()];
+            for (k, n) in joints.iter().enumerate() {
+                for c in n.children() {
+                    if let Some(&ck) = node_to_joint.get(&c.index()) {
+                        parent[ck] = Some(k);
+                    }
+                }
+            }
+            let out: Vec<Joint> = joints
+                .iter()
+                .enumerate()
+                .map(|(k, n)| Joint {
+                    name: n.name().unwrap_or("").to_string(),
+                    parent: parent[k],
+                    pivot: from_gltf(ibms[k].inverse().w_axis.truncate().into()),
+                })
+                .collect();
+            if let Some(bad) = vjoints.iter().flatten().find(|&&j| j as usize >= out.len()) {
+                return Err(invalid(format!(
+                    "skin: vertex joint index {bad} out of range ({} joints)",
+                    out.len()
+                )));
+            }
+            Some(Skin {
+                joints: out,
+                vertex_joints: vjoints,
+                vertex_weights: vweights,
+            })
+        }
+    };
+    let mesh = Mesh {
+        positions,
+        normals,
+        indices,
+        skin,
+    };
+    let (lo, hi) = mesh.bounds();
+    let size = (hi - lo).max_element();
+    if !(0.05..=2.0).contains(&size) {
+        return Err(invalid(format!(
+            "largest extent is {size:.3} m; carcass meshes must be in metres (0.05-2 m)"
+        )));
+    }
+    Ok(mesh)
+}
+
+/// The committed procedural carcass, embedded so rendering works from any directory.
+pub static DEFAULT_CARCASS_GLB: &[u8] = include_bytes!("../../assets/carcass.glb");
+
+/// Parses the embedded default carcass.
+pub fn default_carcass() -> Result<Mesh, GlbError> {
+    from_slice(DEFAULT_CARCASS_GLB, "<embedded assets/carcass.glb>")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetra(skinned: bool) -> Mesh {
+        let positions = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.2, 0.0, 0.0),
+            Vec3::new(0.0, 0.2, 0.0),
+            Vec3::new(0.0, 0.0, 0.2),
+        ];
+        let indices = vec![0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3];
+        let normals = Mesh::compute_normals(&positions, &indices);
+        let skin = skinned.then(|| Skin {
+            joints: vec![
+                Joint {
+                    name: "body".into(),
+                    parent: None,
+                    pivot: Vec3::ZERO,
+                },
+                Joint {
+                    name: "hip_L".into(),
+                    parent: Some(0),
+                    pivot: Vec3::new(0.1, 0.05, 0.0),
+                },
+            ],
+            vertex_joints: vec![[0, 1, 0, 0]; 4],
+            vertex_weights: vec![[0.75, 0.25, 0.0, 0.0]; 4],
+        });
+        Mesh {
+            positions,
+            normals,
+            indices,
+            skin,
+        }
+    }
+
+    #[test]
+    fn roundtrip_skinned_and_rigid() {
+        for skinned in [true, false] {
+            let m = tetra(skinned);
+            let back = from_slice(&to_glb(&m).unwrap(), "t").unwrap();
+            assert_eq!(back.indices, m.indices);
+            for (a, b) in back.positions.iter().zip(&m.positions) {
+                assert!((*a - *b).length() < 1e-6);
+            }
+            match (&back.skin, &m.skin) {
+                (Some(a), Some(b)) => {
+                    assert_eq!(a.vertex_joints, b.vertex_joints);
+                    assert_eq!(a.joints.len(), 2);
+                    assert_eq!(a.joints[1].parent, Some(0));
+                    assert!((a.joints[1].pivot - b.joints[1].pivot).length() < 1e-6);
+                }
+                (None, None) => {}
+                _ => panic!("skin lost or invented"),
+            }
+        }
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        assert!(matches!(
+            from_slice(b"not a glb", "x"),
+            Err(GlbError::Parse(..))
+        ));
+        let good = to_glb(&tetra(false)).unwrap();
+        assert!(from_slice(&good[..good.len() / 2], "x").is_err());
+        assert!(matches!(
+            load(Path::new("/nonexistent/c.glb")),
+            Err(GlbError::Io { .. })
+        ));
+        // Same file with the primitive switched to LINES (mode 1).
+        let mut lines = good.clone();
+        let at = lines.windows(8).position(|w| w == b"\"mode\":4").unwrap();
+        lines[at + 7] = b'1';
+        let e = from_slice(&lines, "lines.glb").unwrap_err();
+        assert!(matches!(e, GlbError::NotTriangles(..)), "{e}");
+        assert!(e.to_string().contains("only triangles"));
+    }
+
+    #[test]
+    fn committed_asset_matches_the_generator() {
+        // If this fails, run `cargo run --release --example gen_carcass` and commit.
+        let fresh = to_glb(&super::super::carcass::generate(
+            super::super::carcass::DEFAULT_CELL,
+        ))
+        .unwrap();
+        assert!(fresh == DEFAULT_CARCASS_GLB, "assets/carcass.glb is stale");
+    }
+
+    #[test]
+    fn embedded_default_loads_skinned() {
+        let m = default_carcass().unwrap();
+        let s = m.skin.as_ref().unwrap();
+        assert_eq!(s.joints.len(), 11);
+        assert!(s.joints.iter().any(|j| j.name == "wrist_R"));
+        assert!((10_000..=40_000).contains(&m.triangle_count()));
+    }
+}

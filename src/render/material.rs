@@ -1,0 +1,320 @@
+//! Surface appearance: raw poultry skin and the background (brushed stainless steel plate,
+//! optionally a modular plastic belt, with optional water/blood stains).
+//!
+//! Materials only answer "what is the surface like here" ([`Surface`]: albedo, shading
+//! normal, specular colour, roughness, metalness, wrap); the light transport lives in
+//! `trace.rs`. Skin texture is evaluated at the rest-pose position, so it stays put on
+//! the skin when the carcass is posed (notes: "Texture in 3D from rest-pose positions").
+
+use glam::{Vec2, Vec3};
+use rand::Rng;
+
+use super::noise::{cellular3, fbm2, fbm3, value2};
+
+/// What the integrator needs to know about a surface point.
+#[derive(Clone, Copy, Debug)]
+pub struct Surface {
+    pub albedo: Vec3,
+    pub normal: Vec3,
+    /// Specular reflectance at normal incidence.
+    pub f0: Vec3,
+    pub roughness: f32,
+    pub metallic: f32,
+    /// Wrap-lighting amount (0 = Lambert); stands in for subsurface scattering.
+    pub wrap: f32,
+    /// Colour of light that scattered under the skin (the wrapped part).
+    pub sss_tint: Vec3,
+    /// Wet film: a second, sharp specular lobe (F0 at normal incidence; 0 = none).
+    pub coat: f32,
+}
+
+/// Per-carcass skin parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SkinMaterial {
+    /// Base colour (linear RGB): cream-pink to yellow.
+    pub base: Vec3,
+    /// Colour of the redder regions (joints, wing tips, cut hocks, bruises).
+    pub red: Vec3,
+    pub seed: u64,
+    /// Follicle cells per metre (~1 follicle per 3-5 mm).
+    pub follicle_freq: f32,
+    pub follicle_bump: f32,
+    pub roughness: f32,
+    /// Wet clear-coat strength (F0).
+    pub wet: f32,
+    pub wrap: f32,
+    pub blotch: f32,
+}
+
+/// Linear value of an sRGB byte triple.
+pub fn srgb8(r: u8, g: u8, b: u8) -> Vec3 {
+    let f = super::sensor::srgb_to_linear;
+    Vec3::new(
+        f(r as f32 / 255.0),
+        f(g as f32 / 255.0),
+        f(b as f32 / 255.0),
+    )
+}
+
+impl SkinMaterial {
+    pub fn sample<R: Rng>(rng: &mut R, yellow: [f32; 2]) -> SkinMaterial {
+        // Cream-pink (white-skinned broilers) to yellow (corn-fed), sampled between the two.
+        let pink = srgb8(242, 204, 184);
+        let cream = srgb8(246, 222, 192);
+        let yel = srgb8(246, 198, 118);
+        let y = rng.random_range(yellow[0]..=yellow[1]);
+        let base = if y < 0.5 {
+            pink.lerp(cream, y * 2.0)
+        } else {
+            cream.lerp(yel, (y - 0.5) * 2.0)
+        } * rng.random_range(0.88..1.05);
+        SkinMaterial {
+            base,
+            red: srgb8(205, 118, 108).lerp(srgb8(190, 95, 95), rng.random_range(0.0..1.0)),
+            seed: rng.random(),
+            follicle_freq: rng.random_range(220.0..320.0),
+            follicle_bump: rng.random_range(0.15..0.35),
+            roughness: rng.random_range(0.22..0.4),
+            wet: rng.random_range(0.035..0.06),
+            wrap: rng.random_range(0.35..0.6),
+            blotch: rng.random_range(0.0..0.35),
+        }
+    }
+
+    /// Skin at a hit: `rest` is the rest-pose position, `n` the interpolated normal,
+    /// `redness` the interpolated joint redness (0..1).
+    pub fn surface(&self, rest: Vec3, n: Vec3, redness: f32) -> Surface {
+        // Low-frequency colour variation and blotchy redness (bruising, blood under skin).
+        let v = fbm3(self.seed, rest * 28.0, 2);
+        let blotch = (fbm3(self.seed ^ 0xB10, rest * 45.0, 2) - 0.55).max(0.0) * 2.2 * self.blotch;
+        let r = (redness * 0.85 + blotch).clamp(0.0, 0.9);
+        let mut albedo = self.base.lerp(self.red, r) * (0.86 + 0.26 * v);
+        // Feather follicles: small bumps (raised rim, dimpled centre) on a jittered lattice.
+        let (d, off) = cellular3(self.seed ^ 0xF011, rest * self.follicle_freq);
+        let mut normal = n;
+        if d < 0.45 {
+            let t = off - n * off.dot(n);
+            let profile = (1.0 - d / 0.45) * self.follicle_bump;
+            normal = (n - t.normalize_or_zero() * profile).normalize_or(n);
+            albedo *= 1.0 - 0.03 * (1.0 - d / 0.45);
+        }
+        Surface {
+            albedo,
+            normal,
+            f0: Vec3::splat(self.wet),
+            roughness: self.roughness * (0.8 + 0.4 * v),
+            metallic: 0.0,
+            wrap: self.wrap,
+            sss_tint: Vec3::new(1.0, 0.42, 0.32),
+            coat: self.wet * 0.4,
+        }
+    }
+}
+
+/// A stain on the plate: a noisy blob.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stain {
+    pub centre: Vec2,
+    pub radius: f32,
+    /// true: diluted blood (reddish tint); false: water (smoother, darker).
+    pub blood: bool,
+}
+
+/// The surface under the carcasses.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Background {
+    /// Brushed stainless steel.
+    Steel {
+        f0: Vec3,
+        roughness: f32,
+        /// Unit brushing direction in the plate plane.
+        brush: Vec2,
+        seed: u64,
+        stains: Vec<Stain>,
+    },
+    /// Modular plastic conveyor belt (white or blue), modules `pitch` metres long.
+    Belt {
+        color: Vec3,
+        pitch: f32,
+        dir: Vec2,
+        stains: Vec<Stain>,
+    },
+}
+
+impl Background {
+    pub fn sample<R: Rng>(
+        rng: &mut R,
+        p_belt: f32,
+        p_stains: f32,
+        steel_roughness: [f32; 2],
+        extent: f32,
+    ) -> Background {
+        let a = rng.random_range(0.0..std::f32::consts::TAU);
+        let dir = Vec2::new(a.cos(), a.sin());
+        let mut stains = Vec::new();
+        if rng.random_bool(p_stains as f64) {
+            for _ in 0..rng.random_range(1..6) {
+                stains.push(Stain {
+                    centre: Vec2::new(
+                        rng.random_range(-extent..extent),
+                        rng.random_range(-extent..extent),
+                    ),
+                    radius: rng.random_range(0.03..0.15),
+                    blood: rng.random_bool(0.4),
+                });
+            }
+        }
+        if rng.random_bool(p_belt as f64) {
+            let color = if rng.random_bool(0.5) {
+                srgb8(225, 228, 226)
+            } else {
+                srgb8(40, 95, 160)
+            };
+            Background::Belt {
+                color,
+                pitch: rng.random_range(0.025..0.05),
+                dir,
+                stains,
+            }
+        } else {
+            Background::Steel {
+                f0: srgb8(196, 199, 202) * rng.random_range(0.9..1.05),
+                roughness: if steel_roughness[1] > steel_roughness[0] {
+                    rng.random_range(steel_roughness[0]..steel_roughness[1])
+                } else {
+                    steel_roughness[0]
+                },
+                brush: dir,
+                seed: rng.random(),
+                stains,
+            }
+        }
+    }
+
+    fn stain_at(stains: &[Stain], p: Vec2) -> (f32, bool) {
+        let mut best = (0.0f32, false);
+        for (i, s) in stains.iter().enumerate() {
+            let d = (p - s.centre).length() / s.radius;
+            if d < 1.6 {
+                let n = fbm2(i as u64 * 31 + 5, p.x * 18.0, p.y * 18.0, 3);
+                let m = (1.25 - d - 0.6 * (n - 0.5)).clamp(0.0, 0.25) * 4.0;
+                if m > best.0 {
+                    best = (m, s.blood);
+                }
+            }
+        }
+        best
+    }
+
+    /// Plate surface at plate point `p` (z = 0).
+    pub fn surface(&self, p: Vec3) -> Surface {
+        let q = p.truncate();
+        match self {
+            Background::Steel {
+                f0,
+                roughness,
+                brush,
+                seed,
+                stains,
+            } => {
+                let along = q.dot(*brush);
+                let across = q.dot(brush.perp());
+                // Brushed: fine streaks across the brushing direction, stretched along it.
+                // Streak widths ~1-4 mm: at ~1 mm per pixel finer ones would average away.
+                let streak = value2(*seed, across * 700.0, along * 6.0) * 0.5
+                    + value2(*seed ^ 1, across * 220.0, along * 3.0) * 0.5;
+                let smudge = fbm2(*seed ^ 2, q.x * 6.0, q.y * 6.0, 3);
+                let (stain, blood) = Self::stain_at(stains, q);
+                let mut f0 = *f0 * (0.86 + 0.2 * streak) * (0.92 + 0.12 * smudge);
+                let mut rough =
+                    (roughness + 0.12 * (streak - 0.5) + 0.15 * (smudge - 0.5)).clamp(0.08, 0.6);
+                let mut albedo = Vec3::splat(0.02);
+                if stain > 0.0 {
+                    if blood {
+                        f0 = f0.lerp(f0 * Vec3::new(0.8, 0.5, 0.48), stain * 0.45);
+                        albedo = albedo.lerp(Vec3::new(0.2, 0.03, 0.03), stain * 0.25);
+                    } else {
+                        f0 *= 1.0 - 0.12 * stain;
+                    }
+                    rough = rough * (1.0 - 0.6 * stain) + 0.05 * stain;
+                }
+                Surface {
+                    albedo,
+                    normal: Vec3::Z,
+                    f0,
+                    roughness: rough,
+                    metallic: 1.0,
+                    wrap: 0.0,
+                    sss_tint: Vec3::ONE,
+                    coat: 0.0,
+                }
+            }
+            Background::Belt {
+                color,
+                pitch,
+                dir,
+                stains,
+            } => {
+                let along = q.dot(*dir) / pitch;
+                let across = q.dot(dir.perp()) / (pitch * 0.5);
+                let row = along.floor();
+                // Modules are staggered row by row; dark hinge gaps between them.
+                let shift = if (row as i64).rem_euclid(2) == 0 {
+                    0.0
+                } else {
+                    0.5
+                };
+                let fu = along.fract();
+                let fv = (across + shift).rem_euclid(1.0);
+                let gap = (fu < 0.08) || (fv < 0.06);
+                let grime = fbm2(11, q.x * 10.0, q.y * 10.0, 3);
+                let mut albedo = if gap {
+                    *color * 0.12
+                } else {
+                    *color * (0.85 + 0.2 * grime)
+                };
+                let (stain, blood) = Self::stain_at(stains, q);
+                if stain > 0.0 && blood {
+                    albedo = albedo.lerp(albedo * Vec3::new(0.8, 0.3, 0.3), stain * 0.7);
+                }
+                Surface {
+                    albedo,
+                    normal: Vec3::Z,
+                    f0: Vec3::splat(0.04),
+                    roughness: if stain > 0.0 { 0.15 } else { 0.45 },
+                    metallic: 0.0,
+                    wrap: 0.0,
+                    sss_tint: Vec3::ONE,
+                    coat: 0.0,
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn skin_is_warm_and_steel_is_metal() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        for _ in 0..20 {
+            let m = SkinMaterial::sample(&mut rng, [0.0, 1.0]);
+            let s = m.surface(Vec3::new(0.01, 0.02, 0.03), Vec3::Z, 0.0);
+            assert!(
+                s.albedo.x >= s.albedo.y && s.albedo.y >= s.albedo.z,
+                "{:?}",
+                s.albedo
+            );
+            assert!((s.normal.length() - 1.0).abs() < 1e-4);
+            let red = m.surface(Vec3::new(0.01, 0.02, 0.03), Vec3::Z, 1.0);
+            assert!(red.albedo.y / red.albedo.x < s.albedo.y / s.albedo.x);
+        }
+        let bg = Background::sample(&mut rng, 0.0, 0.0, [0.2, 0.4], 0.5);
+        let s = bg.surface(Vec3::new(0.1, 0.2, 0.0));
+        assert_eq!(s.metallic, 1.0);
+        assert!(s.roughness >= 0.08 && s.roughness <= 0.6);
+    }
+}
