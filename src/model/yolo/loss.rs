@@ -1,0 +1,546 @@
+//! YOLO-seg training losses, following ultralytics 8.4.190 `v8SegmentationLoss`:
+//! BCE-with-logits classification against TAL soft targets, CIoU + DFL box losses on the
+//! positives, and the prototype mask loss (per positive: BCE of `coef · proto` against its
+//! GT mask, cropped to the GT box, mean over pixels divided by the normalised box area,
+//! averaged over all positives). Gains box 7.5, cls 0.5, dfl 1.5, seg 7.5 by default.
+//!
+//! Numerics (the known NaN sources of the reference): the target-score sum is clamped to ≥ 1;
+//! with no positives the box, DFL and mask terms are exact zeros (no `inf · 0`); BCE and
+//! log-softmax are written in their overflow-free forms; the normalised box area of the
+//! mask loss is clamped to at least one prototype pixel; CIoU carries the reference's eps.
+//!
+//! Ground truth comes as [`YoloTargets`] (per image: boxes xyxy px, classes, instance masks
+//! at input resolution). The assigner runs on host copies of the detached predictions.
+
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Int, Tensor, TensorData};
+
+use super::assigner::{assign_image, AssignerConfig, ImageAssignment};
+use super::head::REG_MAX;
+use super::YoloOutput;
+
+/// Ground truth of one image. Masks are row-major `H × W` at the network input size,
+/// non-zero inside the instance; pixels shared by several instances go to the smaller one.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ImageTargets {
+    /// xyxy in input pixels.
+    pub boxes: Vec<[f32; 4]>,
+    pub classes: Vec<usize>,
+    /// One mask per instance, `H · W` bytes each.
+    pub masks: Vec<Vec<u8>>,
+}
+
+/// Ground truth of a batch, one entry per image in batch order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct YoloTargets {
+    pub images: Vec<ImageTargets>,
+}
+
+/// Loss gains (ultralytics hyp `box`, `cls`, `dfl`; the mask loss uses the `box` gain there).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LossWeights {
+    pub bbox: f64,
+    pub cls: f64,
+    pub dfl: f64,
+    pub seg: f64,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        Self {
+            bbox: 7.5,
+            cls: 0.5,
+            dfl: 1.5,
+            seg: 7.5,
+        }
+    }
+}
+
+/// Named loss terms, each already multiplied by its gain (as ultralytics logs them), and
+/// `total = (box + cls + dfl + seg) · batch_size`, the quantity ultralytics back-propagates.
+#[derive(Debug, Clone)]
+pub struct LossTerms {
+    pub bbox: Tensor<1>,
+    pub cls: Tensor<1>,
+    pub dfl: Tensor<1>,
+    pub seg: Tensor<1>,
+    pub total: Tensor<1>,
+    /// Number of positive anchors in the batch.
+    pub num_fg: usize,
+}
+
+impl LossTerms {
+    /// Host values `[box, cls, dfl, seg, total]` (syncs the device).
+    pub fn values(&self) -> [f32; 5] {
+        let v = |t: &Tensor<1>| {
+            t.clone()
+                .into_data_as::<f32>()
+                .try_into_vec::<f32>()
+                .unwrap()[0]
+        };
+        [
+            v(&self.bbox),
+            v(&self.cls),
+            v(&self.dfl),
+            v(&self.seg),
+            v(&self.total),
+        ]
+    }
+}
+
+pub(crate) fn to_host<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data_as::<f32>().try_into_vec::<f32>().unwrap()
+}
+
+fn host_tensor<const D: usize>(v: Vec<f32>, shape: [usize; D], device: &Device) -> Tensor<D> {
+    Tensor::from_data(TensorData::new(v, shape), device)
+}
+
+fn host_index(v: Vec<usize>, device: &Device) -> Tensor<1, Int> {
+    let n = v.len();
+    let v: Vec<i64> = v.into_iter().map(|i| i as i64).collect();
+    Tensor::from_data(TensorData::new(v, [n]), device)
+}
+
+/// Overflow-free log-softmax along `dim`.
+pub fn log_softmax_stable<const D: usize>(x: Tensor<D>, dim: usize) -> Tensor<D> {
+    let m = x.clone().max_dim(dim).detach();
+    let z = x - m;
+    let lse = z.clone().exp().sum_dim(dim).log();
+    z - lse
+}
+
+/// Element-wise BCE with logits, `max(x, 0) − x·y + log(1 + e^{−|x|})`.
+pub fn bce_with_logits<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<D> {
+    relu(x.clone()) - x.clone() * y + x.abs().neg().exp().log1p()
+}
+
+/// DFL expectation: distances `[.., 4]` from bin logits `[.., 4, REG_MAX]` (last dim bins).
+fn dfl_expectation<const D: usize, const D1: usize>(logits: Tensor<D>) -> Tensor<D1> {
+    let device = logits.device();
+    let p = log_softmax_stable(logits, D - 1).exp();
+    let bins: Vec<f32> = (0..REG_MAX).map(|i| i as f32).collect();
+    let mut shape = [1usize; D];
+    shape[D - 1] = REG_MAX;
+    let proj = host_tensor(bins, shape, &device);
+    (p * proj).sum_dim(D - 1).squeeze_dim(D - 1)
+}
+
+/// Complete IoU of paired boxes (ultralytics `bbox_iou(xywh=False, CIoU=True)`), with the
+/// aspect-ratio trade-off `alpha` detached as in the reference.
+///
+/// # Shapes
+/// - `b1`, `b2`: `[N, 4]` xyxy → `[N]`
+pub fn ciou_tensor(b1: Tensor<2>, b2: Tensor<2>) -> Tensor<1> {
+    let eps = 1e-7;
+    let col = |t: &Tensor<2>, i: usize| t.clone().narrow(1, i, 1).squeeze_dim::<1>(1);
+    let (a_x1, a_y1, a_x2, a_y2) = (col(&b1, 0), col(&b1, 1), col(&b1, 2), col(&b1, 3));
+    let (b_x1, b_y1, b_x2, b_y2) = (col(&b2, 0), col(&b2, 1), col(&b2, 2), col(&b2, 3));
+    let w1 = a_x2.clone() - a_x1.clone();
+    let h1 = a_y2.clone() - a_y1.clone() + eps;
+    let w2 = b_x2.clone() - b_x1.clone();
+    let h2 = b_y2.clone() - b_y1.clone() + eps;
+    let iw =
+        (a_x2.clone().min_pair(b_x2.clone()) - a_x1.clone().max_pair(b_x1.clone())).clamp_min(0.0);
+    let ih =
+        (a_y2.clone().min_pair(b_y2.clone()) - a_y1.clone().max_pair(b_y1.clone())).clamp_min(0.0);
+    let inter = iw * ih;
+    let union = w1.clone() * h1.clone() + w2.clone() * h2.clone() - inter.clone() + eps;
+    let iou = inter / union;
+    let cw = a_x2.clone().max_pair(b_x2.clone()) - a_x1.clone().min_pair(b_x1.clone());
+    let ch = a_y2.clone().max_pair(b_y2.clone()) - a_y1.clone().min_pair(b_y1.clone());
+    let c2 = cw.powi_scalar(2) + ch.powi_scalar(2) + eps;
+    let dx = b_x1 + b_x2 - a_x1 - a_x2;
+    let dy = b_y1 + b_y2 - a_y1 - a_y2;
+    let rho2 = (dx.powi_scalar(2) + dy.powi_scalar(2)) / 4.0;
+    let v = ((w2 / h2).atan() - (w1 / h1).atan())
+        .powi_scalar(2)
+        .mul_scalar(4.0 / (std::f64::consts::PI * std::f64::consts::PI));
+    let alpha = (v.clone() / (iou.clone().neg() + v.clone() + (1.0 + eps))).detach();
+    iou - (rho2 / c2 + v * alpha)
+}
+
+/// Builds the per-instance "overlap" index map at prototype resolution: value `k + 1` where
+/// instance `k` owns the pixel, 0 for background. Instances are painted largest first, so
+/// pixels shared by several instances go to the smaller one (ultralytics
+/// `polygons2masks_overlap`). Pixel `(i, j)` samples the input mask at the centre of its
+/// `ds × ds` block.
+pub fn overlap_index_map(t: &ImageTargets, input: [usize; 2], proto: [usize; 2]) -> Vec<u16> {
+    let [h, w] = input;
+    let [ph, pw] = proto;
+    for (k, m) in t.masks.iter().enumerate() {
+        assert_eq!(
+            m.len(),
+            h * w,
+            "mask {k} has {} bytes, expected {h}×{w} (the input size)",
+            m.len()
+        );
+    }
+    let areas: Vec<usize> = t
+        .masks
+        .iter()
+        .map(|m| m.iter().filter(|&&v| v != 0).count())
+        .collect();
+    let mut order: Vec<usize> = (0..t.masks.len()).collect();
+    order.sort_by(|&a, &b| areas[b].cmp(&areas[a]).then(a.cmp(&b)));
+    let mut out = vec![0u16; ph * pw];
+    for &k in &order {
+        let m = &t.masks[k];
+        for i in 0..ph {
+            let y = ((2 * i + 1) * h / (2 * ph)).min(h - 1);
+            for j in 0..pw {
+                let x = ((2 * j + 1) * w / (2 * pw)).min(w - 1);
+                if m[y * w + x] != 0 {
+                    out[i * pw + j] = (k + 1) as u16;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// One positive anchor, host side.
+#[derive(Debug, Clone, Copy)]
+struct Positive {
+    image: usize,
+    anchor: usize,
+    gt: usize,
+    weight: f32,
+}
+
+/// Full YOLO-seg loss of a batch; see the module docs.
+///
+/// `targets.images.len()` must equal the batch size; class indices must be `< nc`.
+pub fn yolo_loss(out: &YoloOutput, targets: &YoloTargets, weights: &LossWeights) -> LossTerms {
+    let device = out.cls_logits.device();
+    let [b, nc, na] = out.cls_logits.dims();
+    let [_, nm, ph, pw] = out.proto.dims();
+    assert_eq!(
+        targets.images.len(),
+        b,
+        "yolo_loss: {} target images for a batch of {b}",
+        targets.images.len()
+    );
+    assert_eq!(na, out.grid.num_anchors(), "yolo_loss: anchors vs grid");
+    let points = out.grid.points();
+    let strides = out.grid.strides();
+    let level_strides: Vec<usize> = out.grid.levels.iter().map(|l| l.0).collect();
+    let acfg = AssignerConfig::for_strides(&level_strides);
+
+    // Detached predictions to host: probabilities [B, nc, A] and decoded boxes [B, 4, A].
+    let probs = to_host(burn::tensor::activation::sigmoid(
+        out.cls_logits.clone().detach(),
+    ));
+    let dist = out
+        .box_dist
+        .clone()
+        .detach()
+        .reshape([b, 4, REG_MAX, na])
+        .swap_dims(2, 3);
+    let dist = to_host(dfl_expectation::<4, 3>(dist)); // [B, 4, A]
+    let anchors_px: Vec<[f32; 2]> = points
+        .iter()
+        .zip(&strides)
+        .map(|(p, &s)| [p[0] * s, p[1] * s])
+        .collect();
+
+    let mut assignments = Vec::with_capacity(b);
+    for (i, t) in targets.images.iter().enumerate() {
+        let mut sc = vec![0f32; na * nc];
+        for c in 0..nc {
+            for a in 0..na {
+                sc[a * nc + c] = probs[(i * nc + c) * na + a];
+            }
+        }
+        let d = |k: usize, a: usize| dist[(i * 4 + k) * na + a];
+        let boxes: Vec<[f32; 4]> = (0..na)
+            .map(|a| {
+                let (p, s) = (points[a], strides[a]);
+                [
+                    (p[0] - d(0, a)) * s,
+                    (p[1] - d(1, a)) * s,
+                    (p[0] + d(2, a)) * s,
+                    (p[1] + d(3, a)) * s,
+                ]
+            })
+            .collect();
+        assignments.push(assign_image(
+            &acfg,
+            &sc,
+            &boxes,
+            &anchors_px,
+            &t.boxes,
+            &t.classes,
+            nc,
+        ));
+    }
+    let tss: f32 = assignments
+        .iter()
+        .flat_map(|a| a.target_scores.iter())
+        .sum::<f32>()
+        .max(1.0);
+
+    // Classification: BCE over every anchor and class.
+    let mut tgt = vec![0f32; b * nc * na];
+    for (i, asg) in assignments.iter().enumerate() {
+        for a in 0..na {
+            for c in 0..nc {
+                tgt[(i * nc + c) * na + a] = asg.target_scores[a * nc + c];
+            }
+        }
+    }
+    let tgt = host_tensor(tgt, [b, nc, na], &device);
+    let cls = bce_with_logits(out.cls_logits.clone(), tgt)
+        .sum()
+        .div_scalar(tss);
+
+    let positives: Vec<Positive> = assignments
+        .iter()
+        .enumerate()
+        .flat_map(|(i, asg)| {
+            (0..na).filter(move |&a| asg.fg[a]).map(move |a| Positive {
+                image: i,
+                anchor: a,
+                gt: asg.target_gt[a],
+                weight: asg.weight(a),
+            })
+        })
+        .collect();
+    let num_fg = positives.len();
+    let zero = || Tensor::<1>::zeros([1], &device);
+    let (bbox, dfl, seg) = if num_fg == 0 {
+        (zero(), zero(), zero())
+    } else {
+        let (bbox, dfl) = box_losses(out, &assignments, &positives, &points, &strides, tss);
+        let seg = mask_loss(out, targets, &assignments, &positives, [nm, ph, pw]);
+        (bbox, dfl, seg)
+    };
+    let bbox = bbox.mul_scalar(weights.bbox);
+    let cls = cls.reshape([1]).mul_scalar(weights.cls);
+    let dfl = dfl.mul_scalar(weights.dfl);
+    let seg = seg.mul_scalar(weights.seg);
+    let total = (bbox.clone() + cls.clone() + dfl.clone() + seg.clone()).mul_scalar(b as f64);
+    LossTerms {
+        bbox,
+        cls,
+        dfl,
+        seg,
+        total,
+        num_fg,
+    }
+}
+
+/// CIoU and DFL losses over the positives (un-gained), each `[1]`.
+fn box_losses(
+    out: &YoloOutput,
+    assignments: &[ImageAssignment],
+    positives: &[Positive],
+    points: &[[f32; 2]],
+    strides: &[f32],
+    tss: f32,
+) -> (Tensor<1>, Tensor<1>) {
+    let device = out.box_dist.device();
+    let [b, _, na] = out.box_dist.dims();
+    let p = positives.len();
+    // [B, 4·R, A] → [B, A, 4·R] → [B·A, 4, R], then the positives' rows.
+    let rows = out
+        .box_dist
+        .clone()
+        .swap_dims(1, 2)
+        .reshape([b * na, 4, REG_MAX]);
+    let idx = host_index(
+        positives.iter().map(|q| q.image * na + q.anchor).collect(),
+        &device,
+    );
+    let logits = rows.select(0, idx); // [P, 4, R]
+    let dist: Tensor<2> = dfl_expectation::<3, 2>(logits.clone()); // [P, 4] grid units
+
+    let mut anc = Vec::with_capacity(p * 4);
+    let mut tbox = Vec::with_capacity(p * 4);
+    let mut wts = Vec::with_capacity(p);
+    let mut dfl_w = vec![0f32; p * 4 * REG_MAX];
+    for (k, q) in positives.iter().enumerate() {
+        let (pt, s) = (points[q.anchor], strides[q.anchor]);
+        anc.extend_from_slice(&[pt[0], pt[1], pt[0], pt[1]]);
+        let t = assignments[q.image].target_boxes[q.anchor];
+        let t = [t[0] / s, t[1] / s, t[2] / s, t[3] / s];
+        tbox.extend_from_slice(&t);
+        wts.push(q.weight);
+        // bbox2dist clamped to [0, reg_max − 1 − 0.01], then the two neighbouring bins.
+        let ltrb = [pt[0] - t[0], pt[1] - t[1], t[2] - pt[0], t[3] - pt[1]];
+        for (side, &d) in ltrb.iter().enumerate() {
+            let d = d.clamp(0.0, REG_MAX as f32 - 1.0 - 0.01);
+            let tl = d.floor() as usize;
+            let wl = (tl + 1) as f32 - d;
+            let base = (k * 4 + side) * REG_MAX;
+            dfl_w[base + tl] = wl;
+            dfl_w[base + tl + 1] = 1.0 - wl;
+        }
+    }
+    let anc = host_tensor(anc, [p, 4], &device);
+    let sign = host_tensor(vec![-1.0, -1.0, 1.0, 1.0], [1, 4], &device);
+    let pred = anc + dist * sign;
+    let target = host_tensor(tbox, [p, 4], &device);
+    let w = host_tensor(wts, [p], &device);
+    let iou = ciou_tensor(pred, target);
+    let loss_iou = ((iou.neg() + 1.0) * w.clone()).sum().div_scalar(tss);
+
+    let logp = log_softmax_stable(logits, 2);
+    let dfl_w = host_tensor(dfl_w, [p, 4, REG_MAX], &device);
+    let per = (logp * dfl_w).sum_dim(2).neg().mean_dim(1).reshape([p]); // [P]
+    let loss_dfl = (per * w).sum().div_scalar(tss);
+    (loss_iou.reshape([1]), loss_dfl.reshape([1]))
+}
+
+/// Prototype mask loss (un-gained), `[1]`.
+fn mask_loss(
+    out: &YoloOutput,
+    targets: &YoloTargets,
+    assignments: &[ImageAssignment],
+    positives: &[Positive],
+    [nm, ph, pw]: [usize; 3],
+) -> Tensor<1> {
+    let device = out.proto.device();
+    let [b, _, na] = out.mask_coef.dims();
+    let [ih, iw] = out.grid.input;
+    let coef_rows = out.mask_coef.clone().swap_dims(1, 2).reshape([b * na, nm]);
+    let num_fg = positives.len() as f32;
+    let mut total: Option<Tensor<1>> = None;
+    for (i, t) in targets.images.iter().enumerate() {
+        let pos: Vec<&Positive> = positives.iter().filter(|q| q.image == i).collect();
+        if pos.is_empty() {
+            continue;
+        }
+        let index_map = overlap_index_map(t, [ih, iw], [ph, pw]);
+        let inst: Vec<MaskInstance> = pos
+            .iter()
+            .map(|q| MaskInstance {
+                gt: q.gt,
+                box_px: assignments[i].target_boxes[q.anchor],
+            })
+            .collect();
+        let (gt, wt) = mask_targets(&index_map, &inst, [ih, iw], [ph, pw], num_fg);
+        let idx = host_index(pos.iter().map(|q| i * na + q.anchor).collect(), &device);
+        let coef = coef_rows.clone().select(0, idx); // [P_i, nm]
+        let proto = out.proto.clone().narrow(0, i, 1).reshape([nm, ph * pw]);
+        let l = single_mask_loss(coef, proto, gt, wt);
+        total = Some(match total {
+            Some(acc) => acc + l,
+            None => l,
+        });
+    }
+    total.expect("mask_loss called with positives")
+}
+
+/// A positive's mask target: GT index (into the image's instances) and GT box in pixels.
+#[derive(Debug, Clone, Copy)]
+pub struct MaskInstance {
+    pub gt: usize,
+    pub box_px: [f32; 4],
+}
+
+/// Host-built mask targets and per-pixel weights for one image's positives:
+/// `gt[k, p] = index_map[p] == gt_k + 1`; `weight[k, p] = crop_k(p) / (Hp·Wp) / area_k / norm`
+/// with the box scaled to prototype pixels and `area_k` its normalised area (clamped to one
+/// prototype pixel). Returns `([P, Hp·Wp], [P, Hp·Wp])` as flat vectors.
+pub fn mask_targets(
+    index_map: &[u16],
+    inst: &[MaskInstance],
+    input: [usize; 2],
+    proto: [usize; 2],
+    norm: f32,
+) -> (Vec<f32>, Vec<f32>) {
+    let [ih, iw] = input;
+    let [ph, pw] = proto;
+    let hw = ph * pw;
+    let mut gt = vec![0f32; inst.len() * hw];
+    let mut wt = vec![0f32; inst.len() * hw];
+    let min_area = 1.0 / hw as f32;
+    for (k, m) in inst.iter().enumerate() {
+        let nb = [
+            m.box_px[0] / iw as f32,
+            m.box_px[1] / ih as f32,
+            m.box_px[2] / iw as f32,
+            m.box_px[3] / ih as f32,
+        ];
+        let area = ((nb[2] - nb[0]) * (nb[3] - nb[1])).max(min_area);
+        let mb = [
+            nb[0] * pw as f32,
+            nb[1] * ph as f32,
+            nb[2] * pw as f32,
+            nb[3] * ph as f32,
+        ];
+        let w = 1.0 / hw as f32 / area / norm;
+        let label = (m.gt + 1) as u16;
+        for r in 0..ph {
+            let rf = r as f32;
+            let row_in = rf >= mb[1] && rf < mb[3];
+            for c in 0..pw {
+                let p = r * pw + c;
+                if index_map[p] == label {
+                    gt[k * hw + p] = 1.0;
+                }
+                let cf = c as f32;
+                if row_in && cf >= mb[0] && cf < mb[2] {
+                    wt[k * hw + p] = w;
+                }
+            }
+        }
+    }
+    (gt, wt)
+}
+
+/// `Σ bce(coef · proto, gt) · weight`.
+///
+/// # Shapes
+/// - `coef [P, nm]`, `proto [nm, HW]`, `gt`/`weight`: flat `[P · HW]` → `[1]`
+pub fn single_mask_loss(
+    coef: Tensor<2>,
+    proto: Tensor<2>,
+    gt: Vec<f32>,
+    weight: Vec<f32>,
+) -> Tensor<1> {
+    let device = coef.device();
+    let p = coef.dims()[0];
+    let hw = proto.dims()[1];
+    let pred = coef.matmul(proto); // [P, HW]
+    let gt = host_tensor(gt, [p, hw], &device);
+    let wt = host_tensor(weight, [p, hw], &device);
+    (bce_with_logits(pred, gt) * wt).sum().reshape([1])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overlap_pixels_go_to_the_smaller_instance() {
+        // 8×8 input, proto 4×4: a big square and a small one inside it.
+        let (h, w) = (8, 8);
+        let big: Vec<u8> = (0..64).map(|p| u8::from(p % 8 < 6 && p / 8 < 6)).collect();
+        let small: Vec<u8> = (0..64).map(|p| u8::from(p % 8 < 2 && p / 8 < 2)).collect();
+        let t = ImageTargets {
+            boxes: vec![[0.0, 0.0, 6.0, 6.0], [0.0, 0.0, 2.0, 2.0]],
+            classes: vec![0, 0],
+            masks: vec![big, small],
+        };
+        let m = overlap_index_map(&t, [h, w], [4, 4]);
+        assert_eq!(m[0], 2, "shared pixel belongs to the small instance");
+        assert_eq!(m[1], 1);
+        assert_eq!(m[15], 0);
+    }
+
+    #[test]
+    fn bce_is_finite_at_extremes() {
+        let d = Device::flex();
+        let x = Tensor::<1>::from_floats([1e4, -1e4, 0.0, 30.0], &d);
+        let y = Tensor::<1>::from_floats([0.0, 1.0, 0.5, 1.0], &d);
+        let v = to_host(bce_with_logits(x, y));
+        assert!(
+            (v[0] - 1e4).abs() < 1.0 && (v[1] - 1e4).abs() < 1.0,
+            "{v:?}"
+        );
+        assert!((v[2] - std::f32::consts::LN_2).abs() < 1e-6);
+        assert!(v[3] >= 0.0 && v[3] < 1e-12);
+    }
+}
