@@ -76,6 +76,37 @@ pub fn bench_coco(gt: &Path, dt: &Path, repeats: usize) -> Result<String> {
     Ok(out)
 }
 
+/// `chicktrain render`: a rendered, auto-labelled dataset with a preview sheet.
+pub fn render(
+    out: &Path,
+    count: u32,
+    seed: u64,
+    size: u32,
+    preset: &str,
+    carcass: Option<PathBuf>,
+) -> Result<String> {
+    let mut opts = crate::render::RenderOptions::preset(preset, size)?;
+    opts.count = count;
+    opts.seed = seed;
+    opts.carcass = carcass;
+    crate::render::render_dataset(&opts, out, true)?;
+    let proxy = if opts.is_proxy() {
+        " (proxy-real: a rendered stand-in for real photos, not real data)"
+    } else {
+        ""
+    };
+    Ok(format!(
+        "wrote {count} {preset} images{proxy} to {}: images/, annotations.json, preview.png",
+        out.display()
+    ))
+}
+
+/// `chicktrain bench render`.
+pub fn bench_render(size: u32, images: usize, preset: &str, seed: u64) -> Result<String> {
+    let opts = crate::render::RenderOptions::preset(preset, size)?;
+    Ok(crate::render::bench_render(&opts, images, seed)?.to_string())
+}
+
 /// `chicktrain train` / `chicktrain --config X`: so far validates the config and says
 /// what is missing; the trainer lands with the YOLO-seg issue.
 pub fn train(config_name: &str, overrides: &[String], _run_dir: Option<PathBuf>) -> Result<String> {

@@ -51,10 +51,25 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Render auto-labelled carcass piles (arrives with the renderer).
+    /// Render auto-labelled carcass piles: images/, annotations.json (COCO), preview.png.
     Render {
+        /// Output folder.
         #[arg(long)]
         out: PathBuf,
+        /// Number of images.
+        #[arg(long, default_value_t = 16)]
+        count: u32,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Image side in pixels.
+        #[arg(long, default_value_t = 640)]
+        size: u32,
+        /// `synthetic` (training renders) or `proxy-real` (the stand-in for real photos).
+        #[arg(long, default_value = "synthetic")]
+        preset: String,
+        /// A carcass mesh (.glb, skinned or rigid) instead of the embedded one.
+        #[arg(long)]
+        carcass: Option<PathBuf>,
     },
     /// Measure speed: `bench coco` times the COCO evaluator on a GT/DT pair.
     Bench {
@@ -85,6 +100,17 @@ enum Command {
 
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// Renderer speed: images/s with shadows and masks, and where the time goes.
+    Render {
+        #[arg(long, default_value_t = 640)]
+        size: u32,
+        #[arg(long, default_value_t = 12)]
+        images: usize,
+        #[arg(long, default_value = "synthetic")]
+        preset: String,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+    },
     /// Time load + evaluate + accumulate (bbox and segm) on a GT/DT pair.
     Coco {
         #[arg(long)]
@@ -132,9 +158,22 @@ fn run(cli: Cli) -> anyhow::Result<String> {
         },
         Some(Command::Eval { .. }) => not_yet("eval", "YOLO-seg trainer"),
         Some(Command::Predict { .. }) => not_yet("predict", "YOLO-seg trainer"),
-        Some(Command::Render { .. }) => not_yet("render", "built-in renderer"),
+        Some(Command::Render {
+            out,
+            count,
+            seed,
+            size,
+            preset,
+            carcass,
+        }) => cli::render(&out, count, seed, size, &preset, carcass),
         Some(Command::Bench { what }) => match what {
             BenchWhat::Coco { gt, dt, repeats } => cli::bench_coco(&gt, &dt, repeats),
+            BenchWhat::Render {
+                size,
+                images,
+                preset,
+                seed,
+            } => cli::bench_render(size, images, &preset, seed),
         },
         Some(Command::CocoEval {
             gt,
