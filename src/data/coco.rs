@@ -34,6 +34,7 @@ impl Segmentation {
         Ok(match self {
             Segmentation::Polygons(polys) => {
                 check_polygons(polys)?;
+                check_polygon_extent(polys, height, width)?;
                 rle_from_polygons(polys, height, width)
             }
             Segmentation::Rle { size, counts } => {
@@ -85,6 +86,20 @@ pub fn check_polygons(polys: &[Vec<f64>]) -> Result<()> {
         }
         if p.iter().any(|v| !v.is_finite()) {
             bail!("polygon {i} has a non-finite coordinate");
+        }
+    }
+    Ok(())
+}
+
+/// pycocotools walks every polygon edge at 5× resolution, so a coordinate of 1e9 would
+/// allocate billions of points; anything that far off the image is a broken file.
+fn check_polygon_extent(polys: &[Vec<f64>], height: u32, width: u32) -> Result<()> {
+    let limit = 10.0 * (height.max(width) as f64 + 1.0);
+    for (i, p) in polys.iter().enumerate() {
+        if let Some(v) = p.iter().find(|v| v.abs() > limit) {
+            bail!(
+                "polygon {i} has a coordinate {v} far outside its {width}x{height} image (limit ±{limit})"
+            );
         }
     }
     Ok(())

@@ -146,7 +146,8 @@ pub fn mask_to_polygons(mask: &Mask) -> Vec<Vec<f64>> {
     let inside = |label: u32, px: i64, py: i64| -> bool {
         px >= 0 && py >= 0 && px < w && py < h && labels[(py * w + px) as usize] == label
     };
-    let mut seen = vec![false; labels.len()];
+    let parts = labels.iter().copied().max().unwrap_or(0) as usize;
+    let mut seen = vec![false; parts + 1];
     let mut polys: Vec<(u64, Vec<f64>)> = Vec::new();
     let mut sizes: std::collections::HashMap<u32, u64> = std::collections::HashMap::new();
     for &l in &labels {
