@@ -264,7 +264,7 @@ impl Background {
                 } else {
                     0.5
                 };
-                let fu = along.fract();
+                let fu = along.rem_euclid(1.0);
                 let fv = (across + shift).rem_euclid(1.0);
                 let gap = (fu < 0.08) || (fv < 0.06);
                 let grime = fbm2(11, q.x * 10.0, q.y * 10.0, 3);

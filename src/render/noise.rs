@@ -44,13 +44,19 @@ fn lattice(seed: u64, c: IVec3) -> f32 {
 
 /// floor() without the libm call the baseline x86-64 target makes for `f32::floor`.
 #[inline(always)]
-fn ffloor(x: f32) -> f32 {
+pub fn ffloor(x: f32) -> f32 {
     let i = x as i32 as f32;
     if i > x {
         i - 1.0
     } else {
         i
     }
+}
+
+/// ceil() without the libm call.
+#[inline(always)]
+pub fn fceil(x: f32) -> f32 {
+    -ffloor(-x)
 }
 
 #[inline(always)]

@@ -12,6 +12,8 @@
 use glam::{Quat, Vec2, Vec3};
 use rand::Rng;
 
+use super::noise::ffloor;
+
 /// How a carcass lies on the plate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -67,8 +69,8 @@ impl HeightField {
     }
 
     fn cell_of(&self, x: f32, y: f32) -> Option<usize> {
-        let i = ((x - self.origin.x) / self.cell).floor();
-        let j = ((y - self.origin.y) / self.cell).floor();
+        let i = ffloor((x - self.origin.x) / self.cell);
+        let j = ffloor((y - self.origin.y) / self.cell);
         if i < 0.0 || j < 0.0 || i >= self.n as f32 || j >= self.n as f32 {
             return None;
         }

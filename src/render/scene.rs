@@ -9,6 +9,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::{Vec2, Vec3};
 use rand::Rng;
+use rayon::prelude::*;
 
 use super::camera::Camera;
 use super::carcass;
@@ -133,7 +134,10 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
     let mut skins = Vec::with_capacity(n);
     let mut resting = Vec::with_capacity(n);
     let wsum: f32 = opts.resting_weights.iter().sum::<f32>().max(1e-6);
-    for inst in 0..n {
+    // Draw every random choice first (fixed order), then skin in parallel: skinning is
+    // pure, so the scene does not depend on scheduling; drops stay sequential.
+    let mut plans = Vec::with_capacity(n);
+    for _ in 0..n {
         let pose = Pose::sample(rng, &opts.pose);
         let u = rng.random_range(0.0..wsum);
         let mode = if u < opts.resting_weights[0] {
@@ -147,8 +151,16 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
         let q = pile::resting_rotation(rng, mode, yaw);
         let cands = pile::candidates(rng, centre, radius, k);
         skins.push(SkinMaterial::sample(rng, opts.skin_yellow));
-        let (pos, nor) = pose_mesh(&asset.mesh, &pose);
-        let (local, nor) = pile::orient(&pos, &nor, q);
+        plans.push((pose, mode, q, cands));
+    }
+    let posed: Vec<(Vec<Vec3>, Vec<Vec3>)> = plans
+        .par_iter()
+        .map(|(pose, _, q, _)| {
+            let (pos, nor) = pose_mesh(&asset.mesh, pose);
+            pile::orient(&pos, &nor, *q)
+        })
+        .collect();
+    for (inst, ((local, nor), (_, mode, _, cands))) in posed.into_iter().zip(plans).enumerate() {
         let placed = pile::drop_one(&mut hf, &local, &cands);
         let base = geo.positions.len() as u32;
         geo.positions.extend(placed);
