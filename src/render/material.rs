@@ -106,7 +106,7 @@ impl SkinMaterial {
             metallic: 0.0,
             wrap: self.wrap,
             sss_tint: Vec3::new(1.0, 0.42, 0.32),
-            coat: self.wet * 0.4,
+            coat: self.wet * 0.3,
         }
     }
 }

@@ -214,14 +214,20 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
     );
 
     let wbj = opts.white_balance_jitter;
+    // The camera's white balance corrects most of the light's colour (auto WB or a preset
+    // close to the lamp), never all of it, and adds its own small error.
+    let correction = uni(rng, opts.white_balance_correction);
+    let wb_fix = Vec3::ONE / light_rgb.max(Vec3::splat(1e-3)) * light_rgb.y;
+    let wb_fix = Vec3::ONE.lerp(wb_fix, correction);
     let sensor = Sensor {
         exposure_ev: uni(rng, opts.exposure_ev),
         target: 0.2,
-        wb: Vec3::new(
-            1.0 + rng.random_range(-wbj..=wbj),
-            1.0,
-            1.0 + rng.random_range(-wbj..=wbj),
-        ),
+        wb: wb_fix
+            * Vec3::new(
+                1.0 + rng.random_range(-wbj..=wbj),
+                1.0,
+                1.0 + rng.random_range(-wbj..=wbj),
+            ),
         vignette: uni(rng, opts.vignette),
         blur: uni(rng, opts.blur_px),
         shot: uni(rng, opts.shot_noise),
