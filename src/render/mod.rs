@@ -522,3 +522,44 @@ mod tests {
         assert!(render_sample(&o, 0, 0).is_err());
     }
 }
+
+#[cfg(test)]
+mod asset_tests {
+    use super::*;
+
+    #[test]
+    fn a_user_rigid_glb_renders_and_non_square_images_work() {
+        // A rigid 20 x 12 x 8 cm box mesh, as a user's scan would arrive (no skin).
+        let c = [-1.0f32, 1.0];
+        let mut positions = Vec::new();
+        for x in c {
+            for y in c {
+                for z in c {
+                    positions.push(glam::Vec3::new(x * 0.1, y * 0.06, z * 0.04));
+                }
+            }
+        }
+        let indices = vec![
+            0, 1, 3, 0, 3, 2, 4, 6, 7, 4, 7, 5, 0, 4, 5, 0, 5, 1, 2, 3, 7, 2, 7, 6, 0, 2, 6, 0, 6,
+            4, 1, 5, 7, 1, 7, 3,
+        ];
+        let normals = mesh::Mesh::compute_normals(&positions, &indices);
+        let m = mesh::Mesh {
+            positions,
+            normals,
+            indices,
+            skin: None,
+        };
+        let path = std::env::temp_dir().join(format!("ct-box-{}.glb", std::process::id()));
+        std::fs::write(&path, glb::to_glb(&m).unwrap()).unwrap();
+        let mut o = RenderOptions::synthetic(64);
+        o.height = 48;
+        o.carcasses = [2, 3];
+        o.carcass = Some(path.clone());
+        let s = render_sample(&o, 0, 0).unwrap();
+        assert_eq!(s.image.dimensions(), (64, 48));
+        assert_eq!(s.ids.len(), 64 * 48);
+        assert!(!s.instances.is_empty());
+        let _ = std::fs::remove_file(path);
+    }
+}
