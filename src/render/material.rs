@@ -254,9 +254,10 @@ impl Background {
                     + value2(*seed ^ 1, across * 220.0, along * 3.0) * 0.5;
                 let smudge = fbm2(*seed ^ 2, q.x * 6.0, q.y * 6.0, 3);
                 let (stain, blood) = Self::stain_at(stains, q);
-                let mut f0 = *f0 * (0.86 + 0.2 * streak) * (0.92 + 0.12 * smudge);
-                let mut rough =
-                    (roughness + 0.12 * (streak - 0.5) + 0.15 * (smudge - 0.5)).clamp(0.08, 0.6);
+                let mut f0 = *f0 * (0.74 + 0.4 * streak) * (0.9 + 0.16 * smudge);
+                // Streaks modulate brightness only: modulating the lobe width per streak
+                // turns the light's mirror image into saw-tooth spikes.
+                let mut rough = (roughness + 0.12 * (smudge - 0.5)).clamp(0.08, 0.6);
                 let mut albedo = Vec3::splat(0.02);
                 if stain > 0.0 {
                     if blood {
