@@ -238,6 +238,8 @@ pub fn render_dataset(opts: &RenderOptions, out_dir: &Path, progress: bool) -> a
         })
         .collect();
     bar.finish_and_clear();
+    // The data layer's CocoDataset has optional fields (info, licenses) beyond these.
+    #[allow(clippy::needless_update)]
     let mut ds = CocoDataset {
         images: Vec::new(),
         annotations: Vec::new(),

@@ -286,6 +286,7 @@ impl Tracer {
 
     /// Key light (unshadowed, and the fraction of shadow rays that reached it) plus the
     /// room's ambient and specular light: (direct, visibility, other).
+    #[allow(clippy::too_many_arguments)]
     fn shade(
         &self,
         look: &Look,
@@ -487,6 +488,7 @@ pub fn raster_primary(geo: &Geometry, cam: &Camera) -> Vec<u32> {
 /// Edge-aware separable box filter (radius `r` pixels) of the two one-sample terms, shadow
 /// visibility and glossy reflection: only neighbours of the same instance at a similar
 /// depth contribute, so edges stay sharp while the noise averages out.
+#[allow(clippy::needless_range_loop)]
 fn filter_noisy(px: &[PixelOut], w: usize, h: usize, r: usize) -> (Vec<f32>, Vec<Vec3>) {
     // (visibility, reflection, weight): weight 0 marks pixels whose rays were skipped.
     let mut v: Vec<(f32, Vec3, f32)> = px.iter().map(|p| (p.vis, p.refl, p.wt)).collect();
@@ -660,7 +662,7 @@ mod tests {
             .is_none());
         assert!(tr
             .closest(Vec3::new(-1.0, 0.0, 0.1), Vec3::X, 10.0)
-            .map_or(true, |h| h.0.is_finite()));
+            .is_none_or(|h| h.0.is_finite()));
         assert!(!tr.unoccluded(Vec3::new(0.03, -0.02, 0.0), Vec3::Z, 1.0));
         assert!(tr.unoccluded(Vec3::new(0.03, -0.02, 0.0), Vec3::Z, 0.05));
         assert!(tr.unoccluded(Vec3::new(0.3, 0.0, 0.0), Vec3::Z, 1.0));
