@@ -98,7 +98,7 @@ impl Tracer {
         }
         let bvh = build_bvh2_from_tris(
             &tris,
-            BvhBuildParams::very_fast_build(),
+            BvhBuildParams::fastest_build(),
             &mut Duration::default(),
         );
         // Reorder once so hit ids index triangles directly (no indirection per test).
@@ -428,14 +428,42 @@ pub fn raster_primary(geo: &Geometry, cam: &Camera) -> Vec<u32> {
         })
         .collect();
     let band = 16usize;
+    let nbands = h.div_ceil(band);
+    // Bin triangles by the bands their rows touch (in triangle order, so ties resolve
+    // the same way whatever the band layout).
+    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nbands];
+    for (t, tri) in geo.triangles.iter().enumerate() {
+        let (Some(a), Some(b), Some(c)) = (
+            proj[tri[0] as usize],
+            proj[tri[1] as usize],
+            proj[tri[2] as usize],
+        ) else {
+            continue;
+        };
+        let y0 = fceil(a.1.min(b.1).min(c.1) - 0.5).max(0.0);
+        let y1 = ffloor(a.1.max(b.1).max(c.1) - 0.5).min(h as f32 - 1.0);
+        if y0 > y1 {
+            continue;
+        }
+        for bin in bins
+            .iter_mut()
+            .take(y1 as usize / band + 1)
+            .skip(y0 as usize / band)
+        {
+            bin.push(t as u32);
+        }
+    }
     let mut out = vec![u32::MAX; w * h];
     out.par_chunks_mut(w * band)
+        .zip(bins.par_iter())
         .enumerate()
-        .for_each(|(bi, chunk)| {
+        .for_each(|(bi, (chunk, bin))| {
             let y_lo = bi * band;
             let y_hi = (y_lo + band).min(h);
             let mut zbuf = vec![0.0f32; chunk.len()];
-            for (t, tri) in geo.triangles.iter().enumerate() {
+            for &t in bin {
+                let t = t as usize;
+                let tri = &geo.triangles[t];
                 let (Some(a), Some(b), Some(c)) = (
                     proj[tri[0] as usize],
                     proj[tri[1] as usize],
