@@ -59,9 +59,14 @@ pub struct HeightField {
 impl HeightField {
     /// A flat map covering the square of half-size `half` around the origin.
     pub fn new(half: f32, cell: f32) -> HeightField {
+        Self::around(Vec2::ZERO, half, cell)
+    }
+
+    /// A flat map covering the square of half-size `half` around `centre`.
+    pub fn around(centre: Vec2, half: f32, cell: f32) -> HeightField {
         let n = ((2.0 * half / cell).ceil() as usize).max(2);
         HeightField {
-            origin: Vec2::splat(-half),
+            origin: centre - Vec2::splat(half),
             cell,
             n,
             h: vec![0.0; n * n],

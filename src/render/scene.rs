@@ -128,7 +128,9 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
     let spread = 2.4 + (0.45 - 2.4) * density;
     let radius = ((footprint * spread / std::f32::consts::PI).sqrt()).min(half_view * 1.1);
     let k = (12.0 + (2.0 - 12.0) * density).round().max(1.0) as usize;
-    let mut hf = HeightField::new(half_view * 2.0 + 0.6, 0.004);
+    // The map only needs to cover where carcasses can land: the candidate disc plus a
+    // carcass length (keeps it small for wide views).
+    let mut hf = HeightField::around(centre, radius + 0.45, 0.004);
 
     let mut geo = Geometry::default();
     let mut skins = Vec::with_capacity(n);
