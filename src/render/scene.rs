@@ -162,8 +162,9 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
             pile::orient(&pos, &nor, *q)
         })
         .collect();
-    for (inst, ((local, nor), (_, mode, _, cands))) in posed.into_iter().zip(plans).enumerate() {
-        let placed = pile::drop_one(&mut hf, &local, &cands);
+    for (inst, ((local, mut nor), (_, mode, _, cands))) in posed.into_iter().zip(plans).enumerate()
+    {
+        let placed = pile::drop_one(&mut hf, &local, &mut nor, &cands);
         let base = geo.positions.len() as u32;
         geo.positions.extend(placed);
         geo.normals.extend(nor);
