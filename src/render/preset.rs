@@ -109,7 +109,7 @@ impl RenderOptions {
             tilt_max_deg: 10.0,
             light_height: [1.0, 2.2],
             light_size: [0.3, 1.2],
-            light_offset: [1.0, 2.2],
+            light_offset: [1.2, 2.5],
             light_kelvin: [3200.0, 6800.0],
             ambient: [0.15, 0.6],
             exposure_ev: [-0.5, 0.5],

@@ -618,8 +618,9 @@ fn box_blur(src: &[f32], w: usize, h: usize, r: usize, horizontal: bool) -> Vec<
 
 /// Fraction of a specular lobe around direction `r` (from `p`) that lands on the
 /// rectangular light: the lobe's footprint on the light plane is a square of half-width
-/// 2·α·distance, and the fraction is the box-box overlap per axis. Normalised, so rough
-/// surfaces spread the mirror image wider and dimmer instead of just wider.
+/// α·distance (GGX keeps most of its energy within atan α of the mirror direction), and
+/// the fraction is the box-box overlap per axis. Normalised, so rough surfaces spread the
+/// mirror image wider and dimmer instead of just wider.
 fn light_coverage(light: &AreaLight, p: Vec3, r: Vec3, roughness: f32) -> f32 {
     if r.z <= 1e-4 {
         return 0.0;
@@ -633,7 +634,7 @@ fn light_coverage(light: &AreaLight, p: Vec3, r: Vec3, roughness: f32) -> f32 {
     let x = q.dot(light.u) / ul;
     let y = q.dot(light.v) / vl;
     let alpha = (roughness * roughness).max(0.002);
-    let w = 2.0 * alpha * t + 0.002;
+    let w = alpha * t + 0.002;
     let f =
         |x: f32, half: f32| (((x + w).min(half) - (x - w).max(-half)) / (2.0 * w)).clamp(0.0, 1.0);
     f(x, ul) * f(y, vl)
