@@ -136,7 +136,12 @@ impl Rle {
 
     /// `rleArea`: the sum of the foreground runs.
     pub fn area(&self) -> u64 {
-        self.counts.iter().skip(1).step_by(2).map(|&c| c as u64).sum()
+        self.counts
+            .iter()
+            .skip(1)
+            .step_by(2)
+            .map(|&c| c as u64)
+            .sum()
     }
 
     /// `rleToBbox`: [x, y, w, h] of the foreground, zeros when empty.
