@@ -91,6 +91,17 @@ pub struct RenderedSample {
     pub timings: Timings,
 }
 
+impl RenderedSample {
+    /// Visible masks of the kept instances, in `instances` order (data-layer masks).
+    pub fn masks(&self) -> Vec<crate::data::mask::Mask> {
+        let (w, h) = self.image.dimensions();
+        self.instances
+            .iter()
+            .map(|i| export::visible_mask(&self.ids, w, h, i.id))
+            .collect()
+    }
+}
+
 /// The per-image RNG: ChaCha8 keyed by (preset seed space, dataset seed, image index),
 /// so a sample never depends on which thread rendered it or in what order.
 pub fn image_rng(opts: &RenderOptions, seed: u64, index: u64) -> ChaCha8Rng {
@@ -438,7 +449,7 @@ mod tests {
         for i in 0..4 {
             let s = render_sample(&o, 7, i).unwrap();
             let anns = export::annotations(&s.ids, 128, 128, &s.instances, 1, 1);
-            for (inst, ann) in s.instances.iter().zip(&anns) {
+            for (k, (inst, ann)) in s.instances.iter().zip(&anns).enumerate() {
                 let Segmentation::Rle { counts, .. } = &ann.segmentation else {
                     panic!()
                 };
@@ -452,6 +463,7 @@ mod tests {
                     );
                 }
                 assert_eq!(ann.area as u64, inst.visible_px);
+                assert_eq!(s.masks()[k], m);
                 assert!(inst.visible_px <= inst.amodal_px);
                 let polys: Vec<Vec<f64>> =
                     serde_json::from_value(ann.extra["polygons"].clone()).unwrap();
