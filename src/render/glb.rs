@@ -378,6 +378,11 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
                     pivot: from_gltf(ibms[k].inverse().w_axis.truncate().into()),
                 })
                 .collect();
+            if out.iter().any(|j| !j.pivot.is_finite()) {
+                return Err(invalid(
+                    "skin: an inverse bind matrix is singular or non-finite".into(),
+                ));
+            }
             if let Some(bad) = vjoints.iter().flatten().find(|&&j| j as usize >= out.len()) {
                 return Err(invalid(format!(
                     "skin: vertex joint index {bad} out of range ({} joints)",
