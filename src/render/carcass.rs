@@ -239,7 +239,12 @@ impl Sdf {
         }
         // Flatten the back a little (the carcass rests on it breast-up).
         let back = -(p.z + 0.050);
-        smax(d, back, 0.012)
+        let d = smax(d, back, 0.012);
+        // The body-cavity opening at the rear (vent removed in evisceration), between
+        // the hocks, and the neck opening at the front: soft-edged hollows.
+        let vent = (p - Vec3::new(-0.128, 0.0, 0.012)).length() - 0.02;
+        let neck = (p - Vec3::new(0.142, 0.0, -0.004)).length() - 0.012;
+        smax(smax(d, -vent, 0.008), -neck, 0.006)
     }
 
     fn bone_distances(&self, p: Vec3, out: &mut [f32; 11]) {

@@ -64,7 +64,7 @@ pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
                     ty: &str,
                     target: Option<u32>,
                     minmax: Option<([f32; 3], [f32; 3])>| {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let mut view = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
@@ -169,7 +169,7 @@ pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
             + base;
         skins.push(json!({"joints": joints, "inverseBindMatrices": ibm, "skeleton": root}));
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let mut scene_nodes = vec![0usize];
@@ -195,7 +195,7 @@ pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
         root["skins"] = json!(skins);
     }
     let mut text = serde_json::to_vec(&root)?;
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let total = 12 + 8 + text.len() + 8 + bin.len();
@@ -292,7 +292,7 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
                 Some(i) => i.into_u32().collect(),
                 None => (0..n as u32).collect(),
             };
-            if idx.len() % 3 != 0 {
+            if !idx.len().is_multiple_of(3) {
                 return Err(invalid(format!(
                     "primitive {pi} of mesh {mname:?} has {} indices, not a multiple of 3",
                     idx.len()
@@ -378,6 +378,11 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
                     pivot: from_gltf(ibms[k].inverse().w_axis.truncate().into()),
                 })
                 .collect();
+            if out.iter().any(|j| !j.pivot.is_finite()) {
+                return Err(invalid(
+                    "skin: an inverse bind matrix is singular or non-finite".into(),
+                ));
+            }
             if let Some(bad) = vjoints.iter().flatten().find(|&&j| j as usize >= out.len()) {
                 return Err(invalid(format!(
                     "skin: vertex joint index {bad} out of range ({} joints)",

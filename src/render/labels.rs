@@ -10,6 +10,9 @@
 //!   `min_visib_fract` are marked ignore (iscrowd in COCO), fully hidden ones dropped.
 
 use glam::Vec2;
+use rayon::prelude::*;
+
+use super::noise::{fceil, ffloor};
 
 use super::camera::Camera;
 use super::trace::Geometry;
@@ -59,45 +62,56 @@ pub struct InstanceLabel {
 /// triangle, no depth test): one bit mask per instance, row-major.
 pub fn amodal_masks(geo: &Geometry, cam: &Camera, n_instances: usize) -> Vec<Vec<bool>> {
     let (w, h) = (cam.width as usize, cam.height as usize);
-    let mut masks = vec![vec![false; w * h]; n_instances];
-    let proj: Vec<Option<Vec2>> = geo.positions.iter().map(|&p| cam.project(p)).collect();
-    for (t, tri) in geo.triangles.iter().enumerate() {
-        let inst = geo.tri_instance[t] as usize;
-        let (Some(a), Some(b), Some(c)) = (
-            proj[tri[0] as usize],
-            proj[tri[1] as usize],
-            proj[tri[2] as usize],
-        ) else {
-            continue;
-        };
-        let area = (b - a).perp_dot(c - a);
-        if area.abs() < 1e-12 {
-            continue;
-        }
-        let lo = a.min(b).min(c);
-        let hi = a.max(b).max(c);
-        let x0 = (lo.x - 0.5).ceil().max(0.0) as i64;
-        let y0 = (lo.y - 0.5).ceil().max(0.0) as i64;
-        let x1 = ((hi.x - 0.5).floor() as i64).min(w as i64 - 1);
-        let y1 = ((hi.y - 0.5).floor() as i64).min(h as i64 - 1);
-        if x0 > x1 || y0 > y1 {
-            continue;
-        }
-        let m = &mut masks[inst];
-        let s = area.signum();
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                let e0 = (b - a).perp_dot(p - a) * s;
-                let e1 = (c - b).perp_dot(p - b) * s;
-                let e2 = (a - c).perp_dot(p - c) * s;
-                if e0 >= 0.0 && e1 >= 0.0 && e2 >= 0.0 {
-                    m[y as usize * w + x as usize] = true;
+    let proj: Vec<Option<Vec2>> = geo.positions.par_iter().map(|&p| cam.project(p)).collect();
+    // Triangles of one instance are contiguous: find each instance's range, then
+    // rasterise instances in parallel (each owns its mask).
+    let mut ranges = vec![(usize::MAX, 0usize); n_instances];
+    for (t, &inst) in geo.tri_instance.iter().enumerate() {
+        let r = &mut ranges[inst as usize];
+        r.0 = r.0.min(t);
+        r.1 = r.1.max(t + 1);
+    }
+    ranges
+        .par_iter()
+        .map(|&(lo, hi)| {
+            let mut m = vec![false; w * h];
+            for tri in geo.triangles.get(lo..hi).unwrap_or(&[]) {
+                let (Some(a), Some(b), Some(c)) = (
+                    proj[tri[0] as usize],
+                    proj[tri[1] as usize],
+                    proj[tri[2] as usize],
+                ) else {
+                    continue;
+                };
+                let area = (b - a).perp_dot(c - a);
+                if area.abs() < 1e-12 {
+                    continue;
+                }
+                let lo = a.min(b).min(c);
+                let hi = a.max(b).max(c);
+                let x0 = fceil(lo.x - 0.5).max(0.0) as i64;
+                let y0 = fceil(lo.y - 0.5).max(0.0) as i64;
+                let x1 = (ffloor(hi.x - 0.5) as i64).min(w as i64 - 1);
+                let y1 = (ffloor(hi.y - 0.5) as i64).min(h as i64 - 1);
+                if x0 > x1 || y0 > y1 {
+                    continue;
+                }
+                let s = area.signum();
+                for y in y0..=y1 {
+                    for x in x0..=x1 {
+                        let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                        let e0 = (b - a).perp_dot(p - a) * s;
+                        let e1 = (c - b).perp_dot(p - b) * s;
+                        let e2 = (a - c).perp_dot(p - c) * s;
+                        if e0 >= 0.0 && e1 >= 0.0 && e2 >= 0.0 {
+                            m[y as usize * w + x as usize] = true;
+                        }
+                    }
                 }
             }
-        }
-    }
-    masks
+            m
+        })
+        .collect()
 }
 
 /// Pixel bbox `[x, y, w, h]` of a predicate over a `w`×`h` grid, or zeros when empty.

@@ -44,6 +44,8 @@ pub struct SkinMaterial {
     pub wet: f32,
     pub wrap: f32,
     pub blotch: f32,
+    /// Torn-skin patches (rest-space centre, radius): exposed meat, darker and matte.
+    pub tears: Vec<(Vec3, f32)>,
 }
 
 /// Linear value of an sRGB byte triple.
@@ -78,6 +80,21 @@ impl SkinMaterial {
             wet: rng.random_range(0.035..0.06),
             wrap: rng.random_range(0.35..0.6),
             blotch: rng.random_range(0.0..0.35),
+            tears: (0..if rng.random_bool(0.2) {
+                rng.random_range(1..3)
+            } else {
+                0
+            })
+                .map(|_| {
+                    // On the breast/back surface of the default carcass (rest frame).
+                    let c = Vec3::new(
+                        rng.random_range(-0.08..0.08),
+                        rng.random_range(-0.06..0.06),
+                        if rng.random_bool(0.6) { 0.06 } else { -0.05 },
+                    );
+                    (c, rng.random_range(0.008..0.02))
+                })
+                .collect(),
         }
     }
 
@@ -91,6 +108,18 @@ impl SkinMaterial {
         let mut albedo = self.base.lerp(self.red, r) * (0.86 + 0.26 * v);
         // Feather follicles: small bumps (raised rim, dimpled centre) on a jittered lattice.
         let (d, off) = cellular3(self.seed ^ 0xF011, rest * self.follicle_freq);
+        // Torn skin: meat shows through (deeper red-pink, wetter but less glossy film).
+        let mut torn = 0.0f32;
+        for (c, r) in &self.tears {
+            let d = (rest - *c).length() / r;
+            let edge = 1.0 + 0.35 * (v - 0.5);
+            if d < edge {
+                torn = torn.max(((edge - d) * 3.0).min(1.0));
+            }
+        }
+        if torn > 0.0 {
+            albedo = albedo.lerp(srgb8(196, 96, 92), torn * 0.85);
+        }
         let mut normal = n;
         if d < 0.45 {
             let t = off - n * off.dot(n);
@@ -102,11 +131,11 @@ impl SkinMaterial {
             albedo,
             normal,
             f0: Vec3::splat(self.wet),
-            roughness: self.roughness * (0.8 + 0.4 * v),
+            roughness: self.roughness * (0.8 + 0.4 * v) + 0.15 * torn,
             metallic: 0.0,
             wrap: self.wrap,
             sss_tint: Vec3::new(1.0, 0.42, 0.32),
-            coat: self.wet * 0.4,
+            coat: self.wet * 0.3,
         }
     }
 }
@@ -225,9 +254,10 @@ impl Background {
                     + value2(*seed ^ 1, across * 220.0, along * 3.0) * 0.5;
                 let smudge = fbm2(*seed ^ 2, q.x * 6.0, q.y * 6.0, 3);
                 let (stain, blood) = Self::stain_at(stains, q);
-                let mut f0 = *f0 * (0.86 + 0.2 * streak) * (0.92 + 0.12 * smudge);
-                let mut rough =
-                    (roughness + 0.12 * (streak - 0.5) + 0.15 * (smudge - 0.5)).clamp(0.08, 0.6);
+                let mut f0 = *f0 * (0.74 + 0.4 * streak) * (0.9 + 0.16 * smudge);
+                // Streaks modulate brightness only: modulating the lobe width per streak
+                // turns the light's mirror image into saw-tooth spikes.
+                let mut rough = (roughness + 0.12 * (smudge - 0.5)).clamp(0.08, 0.6);
                 let mut albedo = Vec3::splat(0.02);
                 if stain > 0.0 {
                     if blood {
@@ -264,7 +294,7 @@ impl Background {
                 } else {
                     0.5
                 };
-                let fu = along.fract();
+                let fu = along.rem_euclid(1.0);
                 let fv = (across + shift).rem_euclid(1.0);
                 let gap = (fu < 0.08) || (fv < 0.06);
                 let grime = fbm2(11, q.x * 10.0, q.y * 10.0, 3);

@@ -91,6 +91,17 @@ pub struct RenderedSample {
     pub timings: Timings,
 }
 
+impl RenderedSample {
+    /// Visible masks of the kept instances, in `instances` order (data-layer masks).
+    pub fn masks(&self) -> Vec<crate::data::mask::Mask> {
+        let (w, h) = self.image.dimensions();
+        self.instances
+            .iter()
+            .map(|i| export::visible_mask(&self.ids, w, h, i.id))
+            .collect()
+    }
+}
+
 /// The per-image RNG: ChaCha8 keyed by (preset seed space, dataset seed, image index),
 /// so a sample never depends on which thread rendered it or in what order.
 pub fn image_rng(opts: &RenderOptions, seed: u64, index: u64) -> ChaCha8Rng {
@@ -238,6 +249,8 @@ pub fn render_dataset(opts: &RenderOptions, out_dir: &Path, progress: bool) -> a
         })
         .collect();
     bar.finish_and_clear();
+    // The data layer's CocoDataset has optional fields (info, licenses) beyond these.
+    #[allow(clippy::needless_update)]
     let mut ds = CocoDataset {
         images: Vec::new(),
         annotations: Vec::new(),
@@ -289,7 +302,12 @@ pub struct BenchReport {
     pub width: u32,
     pub height: u32,
     pub threads: usize,
+    /// Wall time of the sequential pass (one image at a time, rows in parallel).
     pub wall: Duration,
+    /// Sequential pass: latency-bound rate.
+    pub sequential_images_per_sec: f64,
+    /// Throughput with images rendered concurrently on the pool (as `render_dataset`
+    /// and the stream's workers do): serial stages (BVH build, pile drop) overlap.
     pub images_per_sec: f64,
     /// Mean triangles per image.
     pub triangles: f64,
@@ -302,14 +320,15 @@ impl std::fmt::Display for BenchReport {
         let ms = |d: Duration| d.as_secs_f64() * 1e3;
         write!(
             f,
-            "{} images {}x{} on {} threads: {:.2} images/s ({:.0} ms/image wall); per image: \
-             scene {:.1} ms, build {:.1} ms, trace {:.1} ms, labels {:.1} ms, sensor {:.1} ms, \
-             encode {:.1} ms; {:.0} triangles",
+            "{} images {}x{} on {} threads: {:.2} images/s concurrent, {:.2} images/s one at a \
+             time ({:.0} ms/image); per image: scene {:.1} ms, build {:.1} ms, trace {:.1} ms, \
+             labels {:.1} ms, sensor {:.1} ms, encode {:.1} ms; {:.0} triangles",
             self.images,
             self.width,
             self.height,
             self.threads,
             self.images_per_sec,
+            self.sequential_images_per_sec,
             ms(self.wall) / self.images.max(1) as f64,
             ms(self.mean.scene),
             ms(self.mean.build),
@@ -322,8 +341,9 @@ impl std::fmt::Display for BenchReport {
     }
 }
 
-/// Renders `images` samples one after another (each using all cores for its rows) and
-/// encodes them in the dataset format, without writing files. Stage times are per image.
+/// Renders and encodes `images` samples (no files written) twice: one after another (each
+/// using all cores for its rows; gives the per-stage times) and then concurrently (gives
+/// the throughput a dataset render or the training stream sees).
 pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::Result<BenchReport> {
     opts.validate()?;
     let asset = scene::asset(opts.carcass.as_ref())?;
@@ -339,6 +359,16 @@ pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::R
         sum += s.timings;
     }
     let wall = t0.elapsed();
+    // Throughput pass: the same images, several in flight at once.
+    let t1 = Instant::now();
+    (0..images as u64)
+        .into_par_iter()
+        .try_for_each(|i| -> anyhow::Result<()> {
+            let s = render_sample(opts, seed, i)?;
+            encode_sample(opts, &s)?;
+            Ok(())
+        })?;
+    let wall_par = t1.elapsed();
     let n = images.max(1) as u32;
     let mean = Timings {
         scene: sum.scene / n,
@@ -355,7 +385,8 @@ pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::R
         height: opts.height,
         threads: rayon::current_num_threads(),
         wall,
-        images_per_sec: images as f64 / wall.as_secs_f64().max(1e-9),
+        sequential_images_per_sec: images as f64 / wall.as_secs_f64().max(1e-9),
+        images_per_sec: images as f64 / wall_par.as_secs_f64().max(1e-9),
         triangles: avg_carcasses * asset.mesh.triangle_count() as f64,
         mean,
     })
@@ -418,7 +449,7 @@ mod tests {
         for i in 0..4 {
             let s = render_sample(&o, 7, i).unwrap();
             let anns = export::annotations(&s.ids, 128, 128, &s.instances, 1, 1);
-            for (inst, ann) in s.instances.iter().zip(&anns) {
+            for (k, (inst, ann)) in s.instances.iter().zip(&anns).enumerate() {
                 let Segmentation::Rle { counts, .. } = &ann.segmentation else {
                     panic!()
                 };
@@ -432,6 +463,7 @@ mod tests {
                     );
                 }
                 assert_eq!(ann.area as u64, inst.visible_px);
+                assert_eq!(s.masks()[k], m);
                 assert!(inst.visible_px <= inst.amodal_px);
                 let polys: Vec<Vec<f64>> =
                     serde_json::from_value(ann.extra["polygons"].clone()).unwrap();
@@ -502,5 +534,46 @@ mod tests {
         let mut o = small(64);
         o.width = 0;
         assert!(render_sample(&o, 0, 0).is_err());
+    }
+}
+
+#[cfg(test)]
+mod asset_tests {
+    use super::*;
+
+    #[test]
+    fn a_user_rigid_glb_renders_and_non_square_images_work() {
+        // A rigid 20 x 12 x 8 cm box mesh, as a user's scan would arrive (no skin).
+        let c = [-1.0f32, 1.0];
+        let mut positions = Vec::new();
+        for x in c {
+            for y in c {
+                for z in c {
+                    positions.push(glam::Vec3::new(x * 0.1, y * 0.06, z * 0.04));
+                }
+            }
+        }
+        let indices = vec![
+            0, 1, 3, 0, 3, 2, 4, 6, 7, 4, 7, 5, 0, 4, 5, 0, 5, 1, 2, 3, 7, 2, 7, 6, 0, 2, 6, 0, 6,
+            4, 1, 5, 7, 1, 7, 3,
+        ];
+        let normals = mesh::Mesh::compute_normals(&positions, &indices);
+        let m = mesh::Mesh {
+            positions,
+            normals,
+            indices,
+            skin: None,
+        };
+        let path = std::env::temp_dir().join(format!("ct-box-{}.glb", std::process::id()));
+        std::fs::write(&path, glb::to_glb(&m).unwrap()).unwrap();
+        let mut o = RenderOptions::synthetic(64);
+        o.height = 48;
+        o.carcasses = [2, 3];
+        o.carcass = Some(path.clone());
+        let s = render_sample(&o, 0, 0).unwrap();
+        assert_eq!(s.image.dimensions(), (64, 48));
+        assert_eq!(s.ids.len(), 64 * 48);
+        assert!(!s.instances.is_empty());
+        let _ = std::fs::remove_file(path);
     }
 }

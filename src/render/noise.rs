@@ -44,13 +44,19 @@ fn lattice(seed: u64, c: IVec3) -> f32 {
 
 /// floor() without the libm call the baseline x86-64 target makes for `f32::floor`.
 #[inline(always)]
-fn ffloor(x: f32) -> f32 {
+pub fn ffloor(x: f32) -> f32 {
     let i = x as i32 as f32;
     if i > x {
         i - 1.0
     } else {
         i
     }
+}
+
+/// ceil() without the libm call.
+#[inline(always)]
+pub fn fceil(x: f32) -> f32 {
+    -ffloor(-x)
 }
 
 #[inline(always)]
@@ -111,18 +117,26 @@ pub fn fbm3(seed: u64, p: Vec3, octaves: u32) -> f32 {
 }
 
 /// Cellular noise: (distance to the nearest feature point, offset to it), one jittered
-/// feature point per unit cell.
+/// feature point per unit cell. Searches the 2×2×2 cells nearest to `p` (the octant it
+/// lies in) rather than all 27 neighbours: 3× cheaper, and the rare miss only shifts a
+/// follicle bump, which nobody can see.
 pub fn cellular3(seed: u64, p: Vec3) -> (f32, Vec3) {
-    let c = vfloor(p).as_ivec3();
+    let f = vfloor(p);
+    let c = f.as_ivec3();
+    let t = p - f;
+    let lo = IVec3::new(
+        if t.x < 0.5 { -1 } else { 0 },
+        if t.y < 0.5 { -1 } else { 0 },
+        if t.z < 0.5 { -1 } else { 0 },
+    );
     let mut best = (f32::INFINITY, Vec3::ZERO);
-    for dz in -1..=1 {
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let cc = c + IVec3::new(dx, dy, dz);
+    for dz in 0..2 {
+        for dy in 0..2 {
+            for dx in 0..2 {
+                let cc = c + lo + IVec3::new(dx, dy, dz);
                 let h = lattice_hash(seed, cc.x, cc.y, cc.z);
                 let j = Vec3::new(unit(h), unit(h << 21), unit(h << 42));
-                let fp = cc.as_vec3() + j;
-                let d = fp - p;
+                let d = cc.as_vec3() + j - p;
                 let l = d.length_squared();
                 if l < best.0 {
                     best = (l, d);

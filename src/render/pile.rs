@@ -12,6 +12,8 @@
 use glam::{Quat, Vec2, Vec3};
 use rand::Rng;
 
+use super::noise::ffloor;
+
 /// How a carcass lies on the plate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -57,9 +59,14 @@ pub struct HeightField {
 impl HeightField {
     /// A flat map covering the square of half-size `half` around the origin.
     pub fn new(half: f32, cell: f32) -> HeightField {
+        Self::around(Vec2::ZERO, half, cell)
+    }
+
+    /// A flat map covering the square of half-size `half` around `centre`.
+    pub fn around(centre: Vec2, half: f32, cell: f32) -> HeightField {
         let n = ((2.0 * half / cell).ceil() as usize).max(2);
         HeightField {
-            origin: Vec2::splat(-half),
+            origin: centre - Vec2::splat(half),
             cell,
             n,
             h: vec![0.0; n * n],
@@ -67,8 +74,8 @@ impl HeightField {
     }
 
     fn cell_of(&self, x: f32, y: f32) -> Option<usize> {
-        let i = ((x - self.origin.x) / self.cell).floor();
-        let j = ((y - self.origin.y) / self.cell).floor();
+        let i = ffloor((x - self.origin.x) / self.cell);
+        let j = ffloor((y - self.origin.y) / self.cell);
         if i < 0.0 || j < 0.0 || i >= self.n as f32 || j >= self.n as f32 {
             return None;
         }
@@ -89,8 +96,14 @@ impl HeightField {
 }
 
 /// Drops one carcass (positions with min z = 0, centred in xy) onto the map. `candidates`
-/// are xy positions to try; returns the placed positions and raises the map.
-pub fn drop_one(hf: &mut HeightField, local: &[Vec3], candidates: &[Vec2]) -> Vec<Vec3> {
+/// are xy positions to try; returns the placed positions (normals follow the drape)
+/// and raises the map.
+pub fn drop_one(
+    hf: &mut HeightField,
+    local: &[Vec3],
+    nor: &mut [Vec3],
+    candidates: &[Vec2],
+) -> Vec<Vec3> {
     // A sparse subset is enough to find the contact height (vertices are ~4 mm apart).
     let probe: Vec<Vec3> = local.iter().step_by(5).copied().collect();
     let mut best = (f32::INFINITY, Vec2::ZERO);
@@ -106,7 +119,7 @@ pub fn drop_one(hf: &mut HeightField, local: &[Vec3], candidates: &[Vec2]) -> Ve
         .map(|p| Vec3::new(p.x + off.x, p.y + off.y, p.z + lift))
         .collect();
     if lift > 0.0 {
-        drape(hf, &mut pos);
+        drape(hf, &mut pos, nor);
     }
     // Raise the map to the carcass top (3x3 splat closes gaps between vertices).
     for p in &pos {
@@ -126,7 +139,7 @@ pub fn drop_one(hf: &mut HeightField, local: &[Vec3], candidates: &[Vec2]) -> Ve
 /// Moves each column of the carcass to rest on the map: target shift d = H - bottom,
 /// smoothed over ~3 cm (soft-body bending), then never below the raw shift where the
 /// raw shift pushes up (no interpenetration with what is underneath).
-fn drape(hf: &HeightField, pos: &mut [Vec3]) {
+fn drape(hf: &HeightField, pos: &mut [Vec3], nor: &mut [Vec3]) {
     let (lo, hi) = pos.iter().fold(
         (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(p.truncate()), hi.max(p.truncate())),
@@ -153,11 +166,36 @@ fn drape(hf: &HeightField, pos: &mut [Vec3]) {
         .zip(&support)
         .map(|(&b, &s)| b.is_finite().then_some(s + 0.0005 - b))
         .collect();
-    // Relaxation: box blur (radius ~2.5 cm) then clamp to the raw shift where that pushes
-    // up, repeated, so the shift is smooth yet nothing sinks into the support.
+    // A carcass is semi-rigid: first a plane (tilt) fitted to the shifts, slope limited
+    // to ~35°, then a soft residual on top of it that may sag at most 2 cm.
+    let (mut m, mut rhs) = (glam::Mat3::ZERO, Vec3::ZERO);
+    for j in 0..ny {
+        for i in 0..nx {
+            if let Some(v) = raw[j * nx + i] {
+                let f = Vec3::new(1.0, i as f32 * c, j as f32 * c);
+                m += glam::Mat3::from_cols(f * f.x, f * f.y, f * f.z);
+                rhs += f * v;
+            }
+        }
+    }
+    let coef = if m.determinant().abs() > 1e-12 {
+        m.inverse() * rhs
+    } else {
+        Vec3::new(rhs.x / m.x_axis.x.max(1.0), 0.0, 0.0)
+    };
+    let slope = Vec2::new(coef.y, coef.z);
+    let slope = slope * (0.7 / slope.length().max(0.7));
+    let plane = |i: usize, j: usize| coef.x + slope.x * i as f32 * c + slope.y * j as f32 * c;
+    // Relaxation of the residual: box blur (radius ~2.5 cm) then clamp to the raw shift
+    // where that pushes up, repeated, so nothing sinks into the support.
     let r = (0.025 / c).round() as i32;
-    let mut smooth: Vec<f32> = raw.iter().map(|v| v.unwrap_or(0.0)).collect();
-    for _ in 0..6 {
+    let mut smooth: Vec<f32> = (0..nx * ny).map(|k| plane(k % nx, k / nx)).collect();
+    for k in 0..nx * ny {
+        if let Some(v) = raw[k] {
+            smooth[k] = smooth[k].max(v);
+        }
+    }
+    for _ in 0..4 {
         let prev = smooth.clone();
         for j in 0..ny as i32 {
             for i in 0..nx as i32 {
@@ -168,14 +206,15 @@ fn drape(hf: &HeightField, pos: &mut [Vec3]) {
                         if x >= 0 && y >= 0 && x < nx as i32 && y < ny as i32 {
                             let kk = y as usize * nx + x as usize;
                             if raw[kk].is_some() {
-                                s += prev[kk];
+                                s += prev[kk] - plane(x as usize, y as usize);
                                 w += 1.0;
                             }
                         }
                     }
                 }
                 let k = j as usize * nx + i as usize;
-                let sm = if w > 0.0 { s / w } else { 0.0 };
+                let p0 = plane(i as usize, j as usize);
+                let sm = p0 + if w > 0.0 { (s / w).max(-0.02) } else { 0.0 };
                 smooth[k] = match raw[k] {
                     Some(v) if v > sm => v,
                     _ => sm,
@@ -183,8 +222,41 @@ fn drape(hf: &HeightField, pos: &mut [Vec3]) {
             }
         }
     }
-    for p in pos.iter_mut() {
-        p.z += smooth[cell(*p)];
+    // A last light blur without the clamp: the clamp alone leaves cell-sized steps where
+    // the support is bumpy (a few mm of give is what soft skin does anyway).
+    let prev = smooth.clone();
+    for j in 0..ny {
+        for i in 0..nx {
+            let (mut s, mut w) = (0.0, 0.0);
+            for y in j.saturating_sub(1)..(j + 2).min(ny) {
+                for x in i.saturating_sub(1)..(i + 2).min(nx) {
+                    s += prev[y * nx + x];
+                    w += 1.0;
+                }
+            }
+            smooth[j * nx + i] = s / w;
+        }
+    }
+    // Bilinear shift (and its slope, for the normals) at a point: nearest-cell lookup
+    // would crinkle the surface into cell-sized terraces.
+    let at = |x: f32, y: f32| -> (f32, Vec2) {
+        let fx = ((x - lo.x) / c - 0.5).clamp(0.0, (nx - 1) as f32);
+        let fy = ((y - lo.y) / c - 0.5).clamp(0.0, (ny - 1) as f32);
+        let (i0, j0) = (fx as usize, fy as usize);
+        let (i1, j1) = ((i0 + 1).min(nx - 1), (j0 + 1).min(ny - 1));
+        let (tx, ty) = (fx - i0 as f32, fy - j0 as f32);
+        let g = |i: usize, j: usize| smooth[j * nx + i];
+        let (a, b, cc, d) = (g(i0, j0), g(i1, j0), g(i0, j1), g(i1, j1));
+        let v = (a * (1.0 - tx) + b * tx) * (1.0 - ty) + (cc * (1.0 - tx) + d * tx) * ty;
+        let dx = ((b - a) * (1.0 - ty) + (d - cc) * ty) / c;
+        let dy = ((cc - a) * (1.0 - tx) + (d - b) * tx) / c;
+        (v, Vec2::new(dx, dy))
+    };
+    for (p, n) in pos.iter_mut().zip(nor.iter_mut()) {
+        let (d, g) = at(p.x, p.y);
+        p.z += d;
+        // Surface z += d(x, y): normals tilt by the slope of d.
+        *n = Vec3::new(n.x - n.z * g.x, n.y - n.z * g.y, n.z).normalize_or(*n);
     }
 }
 
@@ -238,15 +310,37 @@ mod tests {
     #[test]
     fn second_carcass_stacks_on_first_and_first_rests_on_plate() {
         let mut hf = HeightField::new(0.5, 0.004);
-        let a = drop_one(&mut hf, &blob(), &[Vec2::ZERO]);
+        let a = drop_one(
+            &mut hf,
+            &blob(),
+            &mut vec![Vec3::Z; blob().len()],
+            &[Vec2::ZERO],
+        );
         assert!(a.iter().map(|p| p.z).fold(f32::INFINITY, f32::min).abs() < 1e-6);
-        let b = drop_one(&mut hf, &blob(), &[Vec2::new(0.02, 0.0)]);
+        let b = drop_one(
+            &mut hf,
+            &blob(),
+            &mut vec![Vec3::Z; blob().len()],
+            &[Vec2::new(0.02, 0.0)],
+        );
+        // Over the first slab it rests on top (no penetration); the 2 cm overhang may sag
+        // a little but stays well above the plate.
+        let over = b
+            .iter()
+            .filter(|p| p.x < 0.045)
+            .map(|p| p.z)
+            .fold(f32::INFINITY, f32::min);
+        assert!(
+            over >= 0.0395,
+            "penetrates: bottom over the first slab at {over}"
+        );
         let bmin = b.iter().map(|p| p.z).fold(f32::INFINITY, f32::min);
-        assert!(bmin > 0.035, "stacked bottom at {bmin}");
+        assert!(bmin > 0.02, "stacked bottom at {bmin}");
         // Given a free spot among the candidates, the drop takes it.
         let c = drop_one(
             &mut hf,
             &blob(),
+            &mut vec![Vec3::Z; blob().len()],
             &[Vec2::new(0.01, 0.0), Vec2::new(0.3, 0.3)],
         );
         assert!(c.iter().all(|p| p.x > 0.2));
@@ -255,13 +349,23 @@ mod tests {
     #[test]
     fn overhanging_carcass_drapes_down_to_the_plate() {
         let mut hf = HeightField::new(0.5, 0.004);
-        drop_one(&mut hf, &blob(), &[Vec2::ZERO]);
+        drop_one(
+            &mut hf,
+            &blob(),
+            &mut vec![Vec3::Z; blob().len()],
+            &[Vec2::ZERO],
+        );
         // Drop a 30 cm long slab half over the first one.
         let long: Vec<Vec3> = blob()
             .iter()
             .map(|p| Vec3::new(p.x * 3.0, p.y, p.z * 0.5))
             .collect();
-        let b = drop_one(&mut hf, &long, &[Vec2::new(0.15, 0.0)]);
+        let b = drop_one(
+            &mut hf,
+            &long,
+            &mut vec![Vec3::Z; long.len()],
+            &[Vec2::new(0.15, 0.0)],
+        );
         // The far end sinks to the plate; the part above the first slab stays above it.
         let far = b
             .iter()

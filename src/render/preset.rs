@@ -65,6 +65,8 @@ pub struct RenderOptions {
     pub ambient: [f32; 2],
     pub exposure_ev: [f32; 2],
     pub white_balance_jitter: f32,
+    /// How much of the light's colour cast the camera's white balance removes (0-1).
+    pub white_balance_correction: [f32; 2],
     pub vignette: [f32; 2],
     pub blur_px: [f32; 2],
     pub shot_noise: [f32; 2],
@@ -105,13 +107,14 @@ impl RenderOptions {
             camera_height: [0.85, 1.3],
             fov_deg: [38.0, 55.0],
             tilt_max_deg: 10.0,
-            light_height: [0.9, 2.0],
+            light_height: [1.0, 2.2],
             light_size: [0.3, 1.2],
-            light_offset: [0.4, 1.4],
+            light_offset: [1.2, 2.5],
             light_kelvin: [3200.0, 6800.0],
             ambient: [0.15, 0.6],
             exposure_ev: [-0.5, 0.5],
             white_balance_jitter: 0.08,
+            white_balance_correction: [0.4, 0.95],
             vignette: [0.0, 0.35],
             blur_px: [0.3, 0.9],
             shot_noise: [0.005, 0.03],
@@ -157,6 +160,7 @@ impl RenderOptions {
             ambient: [0.3, 0.4],
             exposure_ev: [-0.2, 0.3],
             white_balance_jitter: 0.04,
+            white_balance_correction: [0.7, 0.8],
             vignette: [0.2, 0.35],
             blur_px: [0.7, 1.1],
             shot_noise: [0.02, 0.04],
@@ -208,7 +212,7 @@ impl RenderOptions {
             "carcasses range {:?} must be 1 <= lo <= hi <= 64",
             self.carcasses
         );
-        let ranges: [(&str, [f32; 2], f32, f32); 15] = [
+        let ranges: [(&str, [f32; 2], f32, f32); 16] = [
             ("density", self.density, 0.0, 1.0),
             ("skin_yellow", self.skin_yellow, 0.0, 1.0),
             ("camera_height", self.camera_height, 0.3, 5.0),
@@ -224,6 +228,12 @@ impl RenderOptions {
             ("pose.scale", self.pose.scale, 0.5, 2.0),
             ("pose.displacement_mm", self.pose.displacement_mm, 0.0, 20.0),
             ("steel_roughness", self.steel_roughness, 0.05, 1.0),
+            (
+                "white_balance_correction",
+                self.white_balance_correction,
+                0.0,
+                1.0,
+            ),
         ];
         for (name, r, lo, hi) in ranges {
             ensure!(

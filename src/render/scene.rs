@@ -9,6 +9,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::{Vec2, Vec3};
 use rand::Rng;
+use rayon::prelude::*;
 
 use super::camera::Camera;
 use super::carcass;
@@ -127,13 +128,18 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
     let spread = 2.4 + (0.45 - 2.4) * density;
     let radius = ((footprint * spread / std::f32::consts::PI).sqrt()).min(half_view * 1.1);
     let k = (12.0 + (2.0 - 12.0) * density).round().max(1.0) as usize;
-    let mut hf = HeightField::new(half_view * 2.0 + 0.6, 0.004);
+    // The map only needs to cover where carcasses can land: the candidate disc plus a
+    // carcass length (keeps it small for wide views).
+    let mut hf = HeightField::around(centre, radius + 0.45, 0.004);
 
     let mut geo = Geometry::default();
     let mut skins = Vec::with_capacity(n);
     let mut resting = Vec::with_capacity(n);
     let wsum: f32 = opts.resting_weights.iter().sum::<f32>().max(1e-6);
-    for inst in 0..n {
+    // Draw every random choice first (fixed order), then skin in parallel: skinning is
+    // pure, so the scene does not depend on scheduling; drops stay sequential.
+    let mut plans = Vec::with_capacity(n);
+    for _ in 0..n {
         let pose = Pose::sample(rng, &opts.pose);
         let u = rng.random_range(0.0..wsum);
         let mode = if u < opts.resting_weights[0] {
@@ -147,9 +153,18 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
         let q = pile::resting_rotation(rng, mode, yaw);
         let cands = pile::candidates(rng, centre, radius, k);
         skins.push(SkinMaterial::sample(rng, opts.skin_yellow));
-        let (pos, nor) = pose_mesh(&asset.mesh, &pose);
-        let (local, nor) = pile::orient(&pos, &nor, q);
-        let placed = pile::drop_one(&mut hf, &local, &cands);
+        plans.push((pose, mode, q, cands));
+    }
+    let posed: Vec<(Vec<Vec3>, Vec<Vec3>)> = plans
+        .par_iter()
+        .map(|(pose, _, q, _)| {
+            let (pos, nor) = pose_mesh(&asset.mesh, pose);
+            pile::orient(&pos, &nor, *q)
+        })
+        .collect();
+    for (inst, ((local, mut nor), (_, mode, _, cands))) in posed.into_iter().zip(plans).enumerate()
+    {
+        let placed = pile::drop_one(&mut hf, &local, &mut nor, &cands);
         let base = geo.positions.len() as u32;
         geo.positions.extend(placed);
         geo.normals.extend(nor);
@@ -202,14 +217,20 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
     );
 
     let wbj = opts.white_balance_jitter;
+    // The camera's white balance corrects most of the light's colour (auto WB or a preset
+    // close to the lamp), never all of it, and adds its own small error.
+    let correction = uni(rng, opts.white_balance_correction);
+    let wb_fix = Vec3::ONE / light_rgb.max(Vec3::splat(1e-3)) * light_rgb.y;
+    let wb_fix = Vec3::ONE.lerp(wb_fix, correction);
     let sensor = Sensor {
         exposure_ev: uni(rng, opts.exposure_ev),
         target: 0.2,
-        wb: Vec3::new(
-            1.0 + rng.random_range(-wbj..=wbj),
-            1.0,
-            1.0 + rng.random_range(-wbj..=wbj),
-        ),
+        wb: wb_fix
+            * Vec3::new(
+                1.0 + rng.random_range(-wbj..=wbj),
+                1.0,
+                1.0 + rng.random_range(-wbj..=wbj),
+            ),
         vignette: uni(rng, opts.vignette),
         blur: uni(rng, opts.blur_px),
         shot: uni(rng, opts.shot_noise),

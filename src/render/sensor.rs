@@ -103,13 +103,16 @@ impl Sensor {
     pub fn develop(&self, linear: &[Vec3], w: u32, h: u32) -> RgbImage {
         let (wu, hu) = (w as usize, h as usize);
         let lum = |c: Vec3| c.dot(Vec3::new(0.2126, 0.7152, 0.0722));
-        // Auto-exposure on the log-average luminance (robust to specular highlights).
-        let mut la = 0.0f64;
-        for c in linear {
-            la += (lum(*c).max(1e-4) as f64).ln();
-        }
-        let avg = (la / linear.len().max(1) as f64).exp() as f32;
-        let gain = self.target / avg.max(1e-6) * 2f32.powf(self.exposure_ev);
+        // Auto-exposure on the median luminance (of every 7th pixel): a mirrored lamp
+        // on the steel must not darken the carcasses, as a log-average would.
+        let mut sample: Vec<f32> = linear.iter().step_by(7).map(|c| lum(*c)).collect();
+        let mid = sample.len() / 2;
+        let median = if sample.is_empty() {
+            1.0
+        } else {
+            *sample.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
+        };
+        let gain = self.target / median.max(1e-6) * 2f32.powf(self.exposure_ev);
         let mut buf: Vec<Vec3> = linear.iter().map(|c| *c * gain * self.wb).collect();
         if self.blur > 0.05 {
             let k = gaussian_kernel(self.blur);

@@ -59,16 +59,25 @@ pub fn effective_seed(seed: u64, epoch: u64, fresh: bool) -> u64 {
     }
 }
 
-/// Cache key: renderer version + scene options (count/seed excluded) + seed, as hex.
+/// FNV-1a 64: stable across platforms and Rust versions (std's hashers are not).
+fn fnv(h: u64, bytes: &[u8]) -> u64 {
+    bytes
+        .iter()
+        .fold(h, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+}
+
+/// Cache key: renderer version + scene options (count/seed excluded) + seed, and the
+/// bytes of a user carcass file (a replaced file must not reuse stale renders), as hex.
 pub fn cache_key(opts: &RenderOptions, seed: u64) -> Result<String> {
     let mut o = opts.clone();
     o.count = 0;
     o.seed = 0;
     let text = format!("{RENDERER_VERSION}\n{}\n{seed}", serde_json::to_string(&o)?);
-    // FNV-1a 64 then a finaliser: stable across platforms and Rust versions.
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in text.bytes() {
-        h = (h ^ b as u64).wrapping_mul(0x100_0000_01b3);
+    let mut h = fnv(0xcbf2_9ce4_8422_2325, text.as_bytes());
+    if let Some(path) = &opts.carcass {
+        let bytes = std::fs::read(path)
+            .with_context(|| format!("cannot read carcass mesh {}", path.display()))?;
+        h = fnv(h, &bytes);
     }
     Ok(format!("{:016x}", mix64(h)))
 }

@@ -23,7 +23,7 @@ use rayon::prelude::*;
 use super::camera::Camera;
 use super::light::{AreaLight, Environment};
 use super::material::{Background, SkinMaterial, Surface};
-use super::noise::{hash, unit};
+use super::noise::{fceil, ffloor, hash, unit};
 
 /// World-space triangles of all carcasses of one image, with shading attributes.
 #[derive(Clone, Debug, Default)]
@@ -98,7 +98,7 @@ impl Tracer {
         }
         let bvh = build_bvh2_from_tris(
             &tris,
-            BvhBuildParams::very_fast_build(),
+            BvhBuildParams::fastest_build(),
             &mut Duration::default(),
         );
         // Reorder once so hit ids index triangles directly (no indirection per test).
@@ -187,6 +187,10 @@ impl Tracer {
             f32::INFINITY
         };
         let pix = (y as u64) << 32 | x as u64;
+        // With the filter on, shadow and reflection rays go to half the pixels (a
+        // checkerboard); the edge-aware filter fills the others from their neighbours.
+        let sparse = look.shadow_filter > 0 && (x + y) & 1 == 1;
+        let wt = if sparse { 0.0 } else { 1.0 };
         let hit = match hint {
             None => self.closest(o, d, t_plate),
             Some(u32::MAX) => None,
@@ -207,10 +211,11 @@ impl Tracer {
             let p = o + d * t;
             let (s, ng) = self.skin_surface(geo, look, tri, p, d);
             let inst = geo.tri_instance[tri];
-            let (direct, vis, other) = self.shade(look, &s, p, ng, -d, pix);
+            let (direct, vis, other) = self.shade(look, &s, p, ng, -d, pix, sparse);
             return PixelOut {
                 direct,
                 vis,
+                wt,
                 refl: Vec3::ZERO,
                 other,
                 depth: t,
@@ -220,8 +225,8 @@ impl Tracer {
         if t_plate.is_finite() {
             let p = o + d * t_plate;
             let s = look.background.surface(p);
-            let (direct, vis, other) = self.shade(look, &s, p, Vec3::Z, -d, pix);
-            let refl = if look.reflections && s.metallic > 0.5 {
+            let (direct, vis, other) = self.shade(look, &s, p, Vec3::Z, -d, pix, sparse);
+            let refl = if look.reflections && s.metallic > 0.5 && !sparse {
                 self.glossy_reflection(geo, look, &s, p, d, pix)
             } else {
                 Vec3::ZERO
@@ -229,6 +234,7 @@ impl Tracer {
             return PixelOut {
                 direct,
                 vis,
+                wt,
                 refl,
                 other,
                 depth: t_plate,
@@ -238,6 +244,7 @@ impl Tracer {
         PixelOut {
             direct: Vec3::ZERO,
             vis: 1.0,
+            wt: 1.0,
             refl: Vec3::ZERO,
             other: look.env.radiance(d),
             depth: f32::INFINITY,
@@ -279,6 +286,7 @@ impl Tracer {
 
     /// Key light (unshadowed, and the fraction of shadow rays that reached it) plus the
     /// room's ambient and specular light: (direct, visibility, other).
+    #[allow(clippy::too_many_arguments)]
     fn shade(
         &self,
         look: &Look,
@@ -287,6 +295,7 @@ impl Tracer {
         ng: Vec3,
         v: Vec3,
         pix: u64,
+        skip_shadow: bool,
     ) -> (Vec3, f32, Vec3) {
         let n = s.normal;
         let light = &look.light;
@@ -310,9 +319,11 @@ impl Tracer {
             if cos_l <= 0.0 || wrapped <= 0.0 {
                 continue;
             }
-            tried += 1;
-            if self.unoccluded(origin, l, dist - 1e-3) {
-                seen += 1;
+            if !skip_shadow {
+                tried += 1;
+                if self.unoccluded(origin, l, dist - 1e-3) {
+                    seen += 1;
+                }
             }
             let e = light.color * (cos_l / dist2);
             let lambert = ndl.max(0.0);
@@ -394,6 +405,8 @@ impl Tracer {
 struct PixelOut {
     direct: Vec3,
     vis: f32,
+    /// 1 where shadow/reflection rays were traced, 0 where the filter fills in.
+    wt: f32,
     /// Glossy reflection (one ray, filtered like the visibility).
     refl: Vec3,
     other: Vec3,
@@ -415,14 +428,42 @@ pub fn raster_primary(geo: &Geometry, cam: &Camera) -> Vec<u32> {
         })
         .collect();
     let band = 16usize;
+    let nbands = h.div_ceil(band);
+    // Bin triangles by the bands their rows touch (in triangle order, so ties resolve
+    // the same way whatever the band layout).
+    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nbands];
+    for (t, tri) in geo.triangles.iter().enumerate() {
+        let (Some(a), Some(b), Some(c)) = (
+            proj[tri[0] as usize],
+            proj[tri[1] as usize],
+            proj[tri[2] as usize],
+        ) else {
+            continue;
+        };
+        let y0 = fceil(a.1.min(b.1).min(c.1) - 0.5).max(0.0);
+        let y1 = ffloor(a.1.max(b.1).max(c.1) - 0.5).min(h as f32 - 1.0);
+        if y0 > y1 {
+            continue;
+        }
+        for bin in bins
+            .iter_mut()
+            .take(y1 as usize / band + 1)
+            .skip(y0 as usize / band)
+        {
+            bin.push(t as u32);
+        }
+    }
     let mut out = vec![u32::MAX; w * h];
     out.par_chunks_mut(w * band)
+        .zip(bins.par_iter())
         .enumerate()
-        .for_each(|(bi, chunk)| {
+        .for_each(|(bi, (chunk, bin))| {
             let y_lo = bi * band;
             let y_hi = (y_lo + band).min(h);
             let mut zbuf = vec![0.0f32; chunk.len()];
-            for (t, tri) in geo.triangles.iter().enumerate() {
+            for &t in bin {
+                let t = t as usize;
+                let tri = &geo.triangles[t];
                 let (Some(a), Some(b), Some(c)) = (
                     proj[tri[0] as usize],
                     proj[tri[1] as usize],
@@ -432,15 +473,15 @@ pub fn raster_primary(geo: &Geometry, cam: &Camera) -> Vec<u32> {
                 };
                 let ymin = a.1.min(b.1).min(c.1);
                 let ymax = a.1.max(b.1).max(c.1);
-                let y0 = ((ymin - 0.5).ceil().max(y_lo as f32)) as i64;
-                let y1 = ((ymax - 0.5).floor() as i64).min(y_hi as i64 - 1);
+                let y0 = (fceil(ymin - 0.5).max(y_lo as f32)) as i64;
+                let y1 = (ffloor(ymax - 0.5) as i64).min(y_hi as i64 - 1);
                 if y0 > y1 {
                     continue;
                 }
                 let xmin = a.0.min(b.0).min(c.0);
                 let xmax = a.0.max(b.0).max(c.0);
-                let x0 = (xmin - 0.5).ceil().max(0.0) as i64;
-                let x1 = ((xmax - 0.5).floor() as i64).min(w as i64 - 1);
+                let x0 = fceil(xmin - 0.5).max(0.0) as i64;
+                let x1 = (ffloor(xmax - 0.5) as i64).min(w as i64 - 1);
                 if x0 > x1 {
                     continue;
                 }
@@ -475,8 +516,10 @@ pub fn raster_primary(geo: &Geometry, cam: &Camera) -> Vec<u32> {
 /// Edge-aware separable box filter (radius `r` pixels) of the two one-sample terms, shadow
 /// visibility and glossy reflection: only neighbours of the same instance at a similar
 /// depth contribute, so edges stay sharp while the noise averages out.
+#[allow(clippy::needless_range_loop)]
 fn filter_noisy(px: &[PixelOut], w: usize, h: usize, r: usize) -> (Vec<f32>, Vec<Vec3>) {
-    let mut v: Vec<(f32, Vec3)> = px.iter().map(|p| (p.vis, p.refl)).collect();
+    // (visibility, reflection, weight): weight 0 marks pixels whose rays were skipped.
+    let mut v: Vec<(f32, Vec3, f32)> = px.iter().map(|p| (p.vis, p.refl, p.wt)).collect();
     if r > 0 {
         let same = |i: usize, j: usize| {
             let (a, b) = (&px[i], &px[j]);
@@ -499,12 +542,17 @@ fn filter_noisy(px: &[PixelOut], w: usize, h: usize, r: usize) -> (Vec<f32>, Vec
                         }
                         let j = yy as usize * w + xx as usize;
                         if same(i, j) {
-                            s += src[j].0;
-                            sr += src[j].1;
-                            n += 1.0;
+                            let wj = src[j].2;
+                            s += src[j].0 * wj;
+                            sr += src[j].1 * wj;
+                            n += wj;
                         }
                     }
-                    row[x] = (s / n, sr / n);
+                    row[x] = if n > 0.0 {
+                        (s / n, sr / n, 1.0)
+                    } else {
+                        (1.0, Vec3::ZERO, 0.0)
+                    };
                 }
             });
         }
@@ -570,8 +618,9 @@ fn box_blur(src: &[f32], w: usize, h: usize, r: usize, horizontal: bool) -> Vec<
 
 /// Fraction of a specular lobe around direction `r` (from `p`) that lands on the
 /// rectangular light: the lobe's footprint on the light plane is a square of half-width
-/// 2·α·distance, and the fraction is the box-box overlap per axis. Normalised, so rough
-/// surfaces spread the mirror image wider and dimmer instead of just wider.
+/// α·distance (GGX keeps most of its energy within atan α of the mirror direction), and
+/// the fraction is the box-box overlap per axis. Normalised, so rough surfaces spread the
+/// mirror image wider and dimmer instead of just wider.
 fn light_coverage(light: &AreaLight, p: Vec3, r: Vec3, roughness: f32) -> f32 {
     if r.z <= 1e-4 {
         return 0.0;
@@ -585,7 +634,7 @@ fn light_coverage(light: &AreaLight, p: Vec3, r: Vec3, roughness: f32) -> f32 {
     let x = q.dot(light.u) / ul;
     let y = q.dot(light.v) / vl;
     let alpha = (roughness * roughness).max(0.002);
-    let w = 2.0 * alpha * t + 0.002;
+    let w = alpha * t + 0.002;
     let f =
         |x: f32, half: f32| (((x + w).min(half) - (x - w).max(-half)) / (2.0 * w)).clamp(0.0, 1.0);
     f(x, ul) * f(y, vl)
@@ -642,7 +691,7 @@ mod tests {
             .is_none());
         assert!(tr
             .closest(Vec3::new(-1.0, 0.0, 0.1), Vec3::X, 10.0)
-            .map_or(true, |h| h.0.is_finite()));
+            .is_none_or(|h| h.0.is_finite()));
         assert!(!tr.unoccluded(Vec3::new(0.03, -0.02, 0.0), Vec3::Z, 1.0));
         assert!(tr.unoccluded(Vec3::new(0.03, -0.02, 0.0), Vec3::Z, 0.05));
         assert!(tr.unoccluded(Vec3::new(0.3, 0.0, 0.0), Vec3::Z, 1.0));
