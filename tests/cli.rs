@@ -303,3 +303,33 @@ fn render_writes_a_loadable_deterministic_dataset() {
     assert_clean_error(&bad, &["broken.glb"]);
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// ultralytics' `convert_coco` wrote `tests/fixtures/yolo_export/expected/` from the same
+/// COCO file (`make_fixture.py`): multi-part instances, a crowd, a zero-width box.
+#[test]
+fn coco2yolo_matches_ultralytics_byte_for_byte() {
+    let fx = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/yolo_export");
+    let d = tmp("yolo-ul");
+    let out = run(&[
+        "convert",
+        "coco2yolo",
+        fx.join("coco.json").to_str().unwrap(),
+        "--out",
+        d.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut n = 0;
+    for e in std::fs::read_dir(fx.join("expected")).unwrap() {
+        let e = e.unwrap();
+        let want = std::fs::read_to_string(e.path()).unwrap();
+        let got = std::fs::read_to_string(d.join("labels").join(e.file_name())).unwrap();
+        assert_eq!(got, want, "{:?}", e.file_name());
+        n += 1;
+    }
+    assert_eq!(n, 6);
+    std::fs::remove_dir_all(&d).unwrap();
+}

@@ -91,7 +91,8 @@ fn min_index(a: &[[f64; 2]], b: &[[f64; 2]]) -> (usize, usize) {
     (best.1, best.2)
 }
 
-/// ultralytics' `merge_multi_segment`: one outline through all parts of an instance.
+/// ultralytics' `merge_multi_segment` (8.4.190): one outline through all parts of an
+/// instance, each part entered and left at its points nearest the neighbouring parts.
 pub fn merge_multi_segment(segments: &[Vec<[f64; 2]>]) -> Vec<[f64; 2]> {
     let n = segments.len();
     let mut segs: Vec<Vec<[f64; 2]>> = segments.to_vec();
@@ -104,11 +105,12 @@ pub fn merge_multi_segment(segments: &[Vec<[f64; 2]>]) -> Vec<[f64; 2]> {
     let mut s: Vec<Vec<[f64; 2]>> = Vec::new();
     for (i, idx0) in idx_list.iter().enumerate() {
         let mut idx = idx0.clone();
+        let len = segs[i].len();
         if idx.len() == 2 && idx[0] > idx[1] {
-            idx.reverse();
+            // walk a middle part backwards, with its link points mapped into that order
+            idx = idx.iter().map(|&x| len - 1 - x).collect();
             segs[i].reverse();
         }
-        let len = segs[i].len();
         segs[i].rotate_left(idx[0] % len);
         let first = segs[i][0];
         segs[i].push(first);
