@@ -36,21 +36,49 @@ fn assert_clean_error(out: &Output, needles: &[&str]) {
 fn coco_eval_json_prints_the_12_stats() {
     let gt = fixtures().join("cases/02_gt.json");
     let dt = fixtures().join("cases/02_dt.json");
-    let out = run(&["coco-eval", "--gt", gt.to_str().unwrap(), "--dt", dt.to_str().unwrap(), "--iou-type", "segm", "--json"]);
+    let out = run(&[
+        "coco-eval",
+        "--gt",
+        gt.to_str().unwrap(),
+        "--dt",
+        dt.to_str().unwrap(),
+        "--iou-type",
+        "segm",
+        "--json",
+    ]);
     assert!(out.status.success());
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let expected: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(fixtures().join("expected.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(fixtures().join("expected.json")).unwrap())
+            .unwrap();
     assert_eq!(v["stats"], expected["02"]["segm"]);
-    let text = run(&["coco-eval", "--gt", gt.to_str().unwrap(), "--dt", dt.to_str().unwrap(), "--iou-type", "bbox"]);
+    let text = run(&[
+        "coco-eval",
+        "--gt",
+        gt.to_str().unwrap(),
+        "--dt",
+        dt.to_str().unwrap(),
+        "--iou-type",
+        "bbox",
+    ]);
     let s = String::from_utf8_lossy(&text.stdout);
     assert_eq!(s.lines().count(), 12);
-    assert!(s.starts_with(" Average Precision  (AP) @[ IoU=0.50:0.95 | area=   all | maxDets=100 ] = "));
+    assert!(
+        s.starts_with(" Average Precision  (AP) @[ IoU=0.50:0.95 | area=   all | maxDets=100 ] = ")
+    );
 }
 
 #[test]
 fn every_subcommand_has_help() {
-    for sub in ["train", "eval", "predict", "render", "bench", "coco-eval", "convert"] {
+    for sub in [
+        "train",
+        "eval",
+        "predict",
+        "render",
+        "bench",
+        "coco-eval",
+        "convert",
+    ] {
         let out = run(&[sub, "--help"]);
         assert!(out.status.success(), "{sub} --help");
         assert!(!out.stdout.is_empty());
@@ -83,22 +111,50 @@ fn bad_coco_inputs_name_the_file_and_entry() {
     ];
     for (what, gt_path, dt_text, needles) in cases {
         let dt = write(&d, "dt.json", &dt_text);
-        let out = run(&["coco-eval", "--gt", &gt_path, "--dt", &dt, "--iou-type", "segm"]);
+        let out = run(&[
+            "coco-eval",
+            "--gt",
+            &gt_path,
+            "--dt",
+            &dt,
+            "--iou-type",
+            "segm",
+        ]);
         eprintln!("case: {what}");
         assert_clean_error(&out, &needles);
     }
     // GT-side problems, made by editing the parsed file
     let edits: Vec<(&str, fn(&mut serde_json::Value), &str)> = vec![
-        ("unknown category", |v| v["annotations"][0]["category_id"] = 42.into(), "category_id 42"),
-        ("negative box", |v| v["annotations"][0]["bbox"] = serde_json::json!([1, 1, -5, 3]), "negative"),
-        ("duplicate annotation id", |v| {
-            let first = v["annotations"][0]["id"].clone();
-            v["annotations"][1]["id"] = first;
-        }, "appears twice"),
-        ("string iscrowd", |v| v["annotations"][0]["iscrowd"] = "no".into(), "iscrowd"),
-        ("missing area", |v| {
-            v["annotations"][0].as_object_mut().unwrap().remove("area");
-        }, "missing field `area`"),
+        (
+            "unknown category",
+            |v| v["annotations"][0]["category_id"] = 42.into(),
+            "category_id 42",
+        ),
+        (
+            "negative box",
+            |v| v["annotations"][0]["bbox"] = serde_json::json!([1, 1, -5, 3]),
+            "negative",
+        ),
+        (
+            "duplicate annotation id",
+            |v| {
+                let first = v["annotations"][0]["id"].clone();
+                v["annotations"][1]["id"] = first;
+            },
+            "appears twice",
+        ),
+        (
+            "string iscrowd",
+            |v| v["annotations"][0]["iscrowd"] = "no".into(),
+            "iscrowd",
+        ),
+        (
+            "missing area",
+            |v| {
+                v["annotations"][0].as_object_mut().unwrap().remove("area");
+            },
+            "missing field `area`",
+        ),
     ];
     for (what, edit, needle) in edits {
         let mut v: serde_json::Value = serde_json::from_str(&good_gt).unwrap();
@@ -106,7 +162,10 @@ fn bad_coco_inputs_name_the_file_and_entry() {
         let g = write(&d, "gt_bad.json", &v.to_string());
         let dt = write(&d, "dt.json", dt_ok);
         eprintln!("case: {what}");
-        assert_clean_error(&run(&["coco-eval", "--gt", &g, "--dt", &dt]), &["gt_bad.json", needle]);
+        assert_clean_error(
+            &run(&["coco-eval", "--gt", &g, "--dt", &dt]),
+            &["gt_bad.json", needle],
+        );
     }
     // extra fields are fine: real COCO files carry them
     let mut v: serde_json::Value = serde_json::from_str(&good_gt).unwrap();
@@ -114,19 +173,42 @@ fn bad_coco_inputs_name_the_file_and_entry() {
     v["annotations"][0]["attributes"] = serde_json::json!({"occluded": false});
     let g = write(&d, "gt_extra.json", &v.to_string());
     let dt = write(&d, "dt.json", dt_ok);
-    assert!(run(&["coco-eval", "--gt", &g, "--dt", &dt]).status.success());
+    assert!(run(&["coco-eval", "--gt", &g, "--dt", &dt])
+        .status
+        .success());
     std::fs::remove_dir_all(&d).unwrap();
 }
 
 #[test]
 fn config_typos_and_bad_values_exit_2_with_the_key() {
     let d = tmp("cfg");
-    let base = std::fs::read_to_string(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/quickstart.toml")).unwrap();
+    let base = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/quickstart.toml"),
+    )
+    .unwrap();
     let typo = write(&d, "typo.toml", &base.replace("epochs = 10", "epoch = 10"));
-    assert_clean_error(&run(&["--config", &typo]), &["typo.toml", "unknown field `epoch`"]);
-    assert_clean_error(&run(&["--config", "no_such_config.toml"]), &["no_such_config.toml", "quickstart.toml"]);
-    assert_clean_error(&run(&["--config", "quickstart.toml", "--set", "train.batch=0"]), &["train.batch"]);
-    assert_clean_error(&run(&["train", "--config", "quickstart", "--set", "data.real.kind=\"coco\""]), &["data.real.annotations"]);
+    assert_clean_error(
+        &run(&["--config", &typo]),
+        &["typo.toml", "unknown field `epoch`"],
+    );
+    assert_clean_error(
+        &run(&["--config", "no_such_config.toml"]),
+        &["no_such_config.toml", "quickstart.toml"],
+    );
+    assert_clean_error(
+        &run(&["--config", "quickstart.toml", "--set", "train.batch=0"]),
+        &["train.batch"],
+    );
+    assert_clean_error(
+        &run(&[
+            "train",
+            "--config",
+            "quickstart",
+            "--set",
+            "data.real.kind=\"coco\"",
+        ]),
+        &["data.real.annotations"],
+    );
     std::fs::remove_dir_all(&d).unwrap();
 }
 
@@ -143,10 +225,22 @@ fn coco2yolo_writes_normalised_polygons() {
               {"id": 2, "image_id": 1, "category_id": 3, "segmentation": {"size": [50, 100], "counts": [0, 50, 4950]}, "area": 50, "bbox": [0, 0, 1, 50], "iscrowd": 1}
             ]}"#,
     );
-    let out = run(&["convert", "coco2yolo", &gt, "--out", d.join("y").to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = run(&[
+        "convert",
+        "coco2yolo",
+        &gt,
+        "--out",
+        d.join("y").to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let txt = std::fs::read_to_string(d.join("y/labels/a.txt")).unwrap();
     assert_eq!(txt, "0 0.1 0.2 0.6 0.2 0.6 0.8\n");
-    assert!(std::fs::read_to_string(d.join("y/data.yaml")).unwrap().contains("0: carcass"));
+    assert!(std::fs::read_to_string(d.join("y/data.yaml"))
+        .unwrap()
+        .contains("0: carcass"));
     std::fs::remove_dir_all(&d).unwrap();
 }

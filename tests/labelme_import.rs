@@ -29,19 +29,38 @@ fn matches_labelme2coco_on_real_annotations() {
     )
     .unwrap();
     let name = |ds: &CocoDataset, image_id: u64| -> String {
-        let f = &ds.images.iter().find(|i| i.id == image_id).unwrap().file_name;
+        let f = &ds
+            .images
+            .iter()
+            .find(|i| i.id == image_id)
+            .unwrap()
+            .file_name;
         f.rsplit('/').next().unwrap().to_string()
     };
-    let cat = |ds: &CocoDataset, id: u64| ds.categories.iter().find(|c| c.id == id).unwrap().name.clone();
+    let cat = |ds: &CocoDataset, id: u64| {
+        ds.categories
+            .iter()
+            .find(|c| c.id == id)
+            .unwrap()
+            .name
+            .clone()
+    };
     let mut per_image: HashMap<String, Vec<_>> = HashMap::new();
     for a in &theirs.annotations {
-        per_image.entry(name(&theirs, a.image_id)).or_default().push(a);
+        per_image
+            .entry(name(&theirs, a.image_id))
+            .or_default()
+            .push(a);
     }
     assert_eq!(ours.images.len(), 3);
     assert_eq!(ours.annotations.len(), theirs.annotations.len());
     assert!(!ours.categories.iter().any(|c| c.name.starts_with('_')));
     for im in &ours.images {
-        let mine: Vec<_> = ours.annotations.iter().filter(|a| a.image_id == im.id).collect();
+        let mine: Vec<_> = ours
+            .annotations
+            .iter()
+            .filter(|a| a.image_id == im.id)
+            .collect();
         let want = &per_image[&name(&ours, im.id)];
         assert_eq!(mine.len(), want.len(), "{}", im.file_name);
         for (a, b) in mine.iter().zip(want.iter()) {
@@ -49,7 +68,12 @@ fn matches_labelme2coco_on_real_annotations() {
             assert_eq!(a.segmentation, b.segmentation);
             assert!(matches!(a.segmentation, Segmentation::Polygons(_)));
             // labelme's PIL masks add a one-pixel outline: ours lie inside theirs.
-            assert!(a.area <= b.area && a.area >= 0.93 * b.area, "{} vs {}", a.area, b.area);
+            assert!(
+                a.area <= b.area && a.area >= 0.93 * b.area,
+                "{} vs {}",
+                a.area,
+                b.area
+            );
             assert!(a.bbox[0] >= b.bbox[0] && a.bbox[0] <= b.bbox[0] + 1.0);
             assert!(a.bbox[1] >= b.bbox[1] && a.bbox[1] <= b.bbox[1] + 1.0);
             assert!(a.bbox[2] <= b.bbox[2] && a.bbox[2] >= b.bbox[2] - 2.0);
@@ -90,7 +114,10 @@ fn rectangles_groups_and_bad_shapes() {
     assert_eq!(ds.categories.len(), 1);
     assert_eq!(ds.annotations.len(), 2);
     let rect = &ds.annotations[0];
-    assert_eq!(rect.segmentation, Segmentation::Polygons(vec![vec![2.0, 2.0, 12.0, 2.0, 12.0, 8.0, 2.0, 8.0]]));
+    assert_eq!(
+        rect.segmentation,
+        Segmentation::Polygons(vec![vec![2.0, 2.0, 12.0, 2.0, 12.0, 8.0, 2.0, 8.0]])
+    );
     assert_eq!(rect.area, 60.0);
     assert_eq!(rect.bbox, [2.0, 2.0, 10.0, 6.0]);
     assert!(matches!(&ds.annotations[1].segmentation, Segmentation::Polygons(p) if p.len() == 2));
@@ -102,9 +129,19 @@ fn rectangles_groups_and_bad_shapes() {
           {"label": "carcass", "points": [[1, 1], [5, 5]], "shape_type": "polygon"}]}"#,
     );
     let err = format!("{:#}", labelme::load_dir(&dir, None).unwrap_err());
-    assert!(err.contains("b.json") && err.contains("at least 3 points"), "{err}");
-    write(&dir, "b.json", r#"{"imagePath": "b.png", "imageHeight": 20, "#);
+    assert!(
+        err.contains("b.json") && err.contains("at least 3 points"),
+        "{err}"
+    );
+    write(
+        &dir,
+        "b.json",
+        r#"{"imagePath": "b.png", "imageHeight": 20, "#,
+    );
     let err = format!("{:#}", labelme::load_dir(&dir, None).unwrap_err());
-    assert!(err.contains("b.json") && err.contains("invalid LabelMe JSON"), "{err}");
+    assert!(
+        err.contains("b.json") && err.contains("invalid LabelMe JSON"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
