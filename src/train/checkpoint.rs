@@ -78,6 +78,22 @@ pub fn optim_bytes(o: &ModuleOptimizer) -> Result<Vec<u8>> {
     Ok(b.to_vec())
 }
 
+impl std::fmt::Debug for Checkpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Checkpoint")
+            .field("header", &self.header)
+            .field(
+                "sections",
+                &self
+                    .sections
+                    .iter()
+                    .map(|s| (&s.0, s.1.len()))
+                    .collect::<Vec<_>>(),
+            )
+            .finish()
+    }
+}
+
 impl Checkpoint {
     pub fn to_bytes(&self) -> Result<Vec<u8>> {
         let header = serde_json::to_vec(&self.header)?;
@@ -183,5 +199,70 @@ impl<'a> Reader<'a> {
     }
     fn len(&mut self) -> Option<usize> {
         Some(u64::from_le_bytes(self.take(8)?.try_into().ok()?) as usize)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::split::Split;
+    use crate::model::yolo::Scale;
+    use burn::tensor::{Tensor, TensorData};
+
+    #[test]
+    fn round_trip_gives_the_same_outputs_and_bad_files_are_named() {
+        let dev = Device::flex();
+        let mcfg = YoloSegConfig::new(Scale::N, 1)
+            .with_input_size(32)
+            .with_width_mult(0.25)
+            .with_num_masks(4);
+        let model = mcfg.init(&dev);
+        let cfg = crate::config::parse(crate::config::SHIPPED[0].1, "q", &[]).unwrap();
+        let ck = Checkpoint {
+            header: Header {
+                format: 1,
+                chicktrain: "test".into(),
+                model: mcfg.clone(),
+                category_ids: vec![1],
+                class_names: vec!["carcass".into()],
+                config: cfg,
+                split: Split::new(&[1, 2, 3], [0.34, 0.33], 0).unwrap(),
+                proxy: true,
+                epoch: 4,
+                ema_updates: 9,
+                best_fitness: 0.5,
+                val: None,
+            },
+            sections: vec![("ema".into(), module_bytes(&model).unwrap())],
+        };
+        let dir = std::env::temp_dir().join(format!("ct-ckpt-{}", std::process::id()));
+        let p = dir.join("best.bpk");
+        ck.save(&p).unwrap();
+        let back = Checkpoint::load(&p).unwrap();
+        assert_eq!(back.header.epoch, 4);
+        assert_eq!(back.header.model, mcfg);
+        let loaded = back.model("ema", &dev).unwrap();
+        let x = Tensor::<4>::from_data(
+            TensorData::new(
+                (0..3 * 32 * 32)
+                    .map(|i| (i % 7) as f32 / 7.0)
+                    .collect::<Vec<_>>(),
+                [1, 3, 32, 32],
+            ),
+            &dev,
+        );
+        let a = model.forward(x.clone()).cls_logits.into_data();
+        let b = loaded.forward(x).cls_logits.into_data();
+        assert_eq!(a, b);
+        assert!(format!("{:#}", back.model("model", &dev).unwrap_err()).contains("no \"model\""));
+
+        let bytes = std::fs::read(&p).unwrap();
+        std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+        let e = format!("{:#}", Checkpoint::load(&p).unwrap_err());
+        assert!(e.contains("best.bpk") && e.contains("truncated"), "{e}");
+        std::fs::write(&p, b"hello").unwrap();
+        assert!(format!("{:#}", Checkpoint::load(&p).unwrap_err())
+            .contains("not a chicktrain checkpoint"));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

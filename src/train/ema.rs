@@ -72,3 +72,57 @@ impl Ema {
         self.model = m.map(&mut Blend { src: c.0, d });
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::yolo::{Scale, YoloSegConfig};
+    use burn::tensor::Device;
+
+    fn first_weight(m: &YoloSeg) -> Vec<f32> {
+        struct First(Option<Vec<f32>>);
+        impl ModuleVisitor for First {
+            fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+                if self.0.is_none() {
+                    self.0 = Some(p.val().into_data().try_to_vec::<f32>().unwrap());
+                }
+            }
+        }
+        let mut f = First(None);
+        m.visit(&mut f);
+        f.0.unwrap()
+    }
+
+    #[test]
+    fn update_blends_with_the_ramped_decay() {
+        assert!(Ema::decay(1) < 0.001);
+        assert!((Ema::decay(1_000_000) - DECAY).abs() < 1e-9);
+        let dev = Device::flex();
+        let cfg = YoloSegConfig::new(Scale::N, 1)
+            .with_input_size(32)
+            .with_width_mult(0.25)
+            .with_num_masks(4);
+        dev.seed(1);
+        let a = cfg.init(&dev);
+        let mut ema = Ema::new(&a, 2999);
+        let e0 = first_weight(&ema.model);
+        // The trained model moves: a copy of `a` with every weight doubled.
+        struct Double;
+        impl ModuleMapper for Double {
+            fn map_float<const D: usize>(&mut self, p: Param<Tensor<D>>) -> Param<Tensor<D>> {
+                p.map(|t| t.mul_scalar(2.0))
+            }
+        }
+        let b = a.clone().map(&mut Double);
+        ema.update(&b);
+        assert_eq!(ema.updates, 3000);
+        let d = Ema::decay(3000) as f32;
+        for (e, x) in first_weight(&ema.model).iter().zip(&e0) {
+            let want = d * x + (1.0 - d) * 2.0 * x;
+            assert!(
+                (e - want).abs() <= 1e-5 * want.abs().max(1.0),
+                "{e} vs {want}"
+            );
+        }
+    }
+}

@@ -112,3 +112,106 @@ pub fn clip_global_norm<M: Module>(
     }
     Ok(norm)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::yolo::{Scale, YoloSegConfig};
+    use burn::module::ModuleVisitor;
+    use burn::tensor::Device;
+
+    /// Collects (path, values) of the trainable float parameters.
+    struct Paths {
+        stack: Vec<String>,
+        out: Vec<(String, Vec<f32>)>,
+    }
+    impl ModuleVisitor for Paths {
+        fn enter_module(&mut self, name: &str, _: &str) {
+            self.stack.push(name.to_string());
+        }
+        fn exit_module(&mut self, _: &str, _: &str) {
+            self.stack.pop();
+        }
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            let v = p.val().into_data().try_to_vec::<f32>().unwrap();
+            self.out.push((self.stack.join("."), v));
+        }
+    }
+
+    /// With zero gradients, SGD weight decay alone moves the weights: conv weights must
+    /// shrink, BatchNorm γ/β and biases must not.
+    #[test]
+    fn no_weight_decay_on_biases_and_norms() {
+        let dev = Device::flex().autodiff();
+        let model = YoloSegConfig::new(Scale::N, 1)
+            .with_input_size(32)
+            .with_width_mult(0.25)
+            .with_num_masks(4)
+            .init(&dev);
+        let mut t = TrainConfig::default();
+        t.weight_decay = 0.5;
+        t.momentum = 0.0;
+        let mut opt = build(&t);
+        let out = model.forward(burn::tensor::Tensor::zeros([1, 3, 32, 32], &dev));
+        let zero =
+            (out.cls_logits.sum() + out.proto.sum() + out.box_dist.sum() + out.mask_coef.sum())
+                .mul_scalar(0.0);
+        let grads = GradientsParams::from_grads(zero.backward(), &model);
+        let mut before = Paths {
+            stack: vec![],
+            out: vec![],
+        };
+        model.valid().visit(&mut before);
+        let after_model = opt.step(1.0, model, grads);
+        let mut after = Paths {
+            stack: vec![],
+            out: vec![],
+        };
+        after_model.valid().visit(&mut after);
+        let (mut decayed, mut kept) = (0, 0);
+        for ((path, a), (_, b)) in before.out.iter().zip(&after.out) {
+            let moved = a
+                .iter()
+                .zip(b)
+                .any(|(x, y)| (x - y).abs() > 1e-7 && *x != 0.0);
+            let exempt =
+                path.ends_with("gamma") || path.ends_with("beta") || path.ends_with("bias");
+            if path.ends_with("running_mean") || path.ends_with("running_var") {
+                continue;
+            }
+            if exempt {
+                assert!(!moved, "{path} was decayed");
+                kept += 1;
+            } else if path.ends_with("weight") && a.iter().any(|x| *x != 0.0) {
+                assert!(moved, "{path} was not decayed");
+                decayed += 1;
+            }
+        }
+        assert!(
+            decayed > 10 && kept > 10,
+            "{decayed} decayed, {kept} exempt"
+        );
+    }
+
+    #[test]
+    fn global_norm_clipping_scales_all_grads() {
+        let dev = Device::flex().autodiff();
+        let model = YoloSegConfig::new(Scale::N, 1)
+            .with_input_size(32)
+            .with_width_mult(0.25)
+            .with_num_masks(4)
+            .init(&dev);
+        let out = model.forward(burn::tensor::Tensor::ones([1, 3, 32, 32], &dev));
+        let loss = out.cls_logits.sum().mul_scalar(100.0) + out.proto.powi_scalar(2).sum();
+        let mut grads = GradientsParams::from_grads(loss.backward(), &model);
+        let n0 = grad_norm(&model, &grads);
+        assert!(n0 > 1.0, "{n0}");
+        let r = clip_global_norm(&model, &mut grads, 1.0).unwrap();
+        assert!((r - n0).abs() < 1e-9);
+        let n1 = grad_norm(&model, &grads);
+        assert!((n1 - 1.0).abs() < 1e-3, "clipped norm {n1}");
+        // Below the threshold nothing changes.
+        assert!((clip_global_norm(&model, &mut grads, 10.0).unwrap() - n1).abs() < 1e-9);
+        assert!((grad_norm(&model, &grads) - n1).abs() < 1e-6);
+    }
+}
