@@ -3,9 +3,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 
-use crate::config;
 use crate::data::coco::{load_results, CocoDataset};
 use crate::data::{labelme, yolo_export};
 use crate::eval::{evaluate, IouType};
@@ -107,16 +106,11 @@ pub fn bench_render(size: u32, images: usize, preset: &str, seed: u64) -> Result
     Ok(crate::render::bench_render(&opts, images, seed)?.to_string())
 }
 
-/// `chicktrain train` / `chicktrain --config X`: so far validates the config and says
-/// what is missing; the trainer lands with the YOLO-seg issue.
-pub fn train(config_name: &str, overrides: &[String], _run_dir: Option<PathBuf>) -> Result<String> {
-    let cfg = config::load(config_name, overrides)?;
-    bail!(
-        "config {config_name:?} is valid (run {:?}, {} real via {:?}, {} synthetic), but this build \
-         has no trainer yet: training arrives with the YOLO-seg trainer",
-        cfg.name,
-        cfg.data.real.count,
-        cfg.data.real.kind,
-        cfg.data.synthetic
-    )
+/// `chicktrain train` / `chicktrain --config X`: see [`crate::train::commands::train_cmd`].
+pub fn train(
+    config_name: &str,
+    overrides: &[String],
+    opts: &crate::train::trainer::TrainOptions,
+) -> Result<String> {
+    crate::train::commands::train_cmd(config_name, overrides, opts)
 }

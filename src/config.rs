@@ -94,6 +94,9 @@ pub struct RealConfig {
     /// LabelMe: optional `labels.txt` fixing the category order.
     #[serde(default)]
     pub labels: Option<PathBuf>,
+    /// Use only the first N images (by id) of the real set (`--smoke` sets it).
+    #[serde(default)]
+    pub limit: Option<usize>,
 }
 
 fn default_real_count() -> usize {
@@ -119,6 +122,14 @@ pub struct DataConfig {
     /// Random training crop (paper: 512 of 640); equal to `image_size` for none.
     #[serde(default = "default_crop")]
     pub crop: u32,
+    /// Render cache root (relative to the working directory): rendered images are
+    /// stored once under `<cache>/<key>/` and read back by later runs and `eval`.
+    #[serde(default = "default_cache")]
+    pub cache: PathBuf,
+}
+
+fn default_cache() -> PathBuf {
+    PathBuf::from("runs/cache")
 }
 
 fn default_split() -> [f64; 2] {
@@ -387,6 +398,12 @@ impl Config {
         let [ft, fv] = d.split;
         if !(ft > 0.0 && fv > 0.0 && ft + fv < 1.0) {
             bail!("data.split = [{ft}, {fv}] must be two positive fractions (train, val) summing to less than 1");
+        }
+        if d.real.limit.is_some_and(|l| l < 3) {
+            bail!(
+                "data.real.limit = {:?} must be at least 3 (one image per split)",
+                d.real.limit
+            );
         }
         match d.real.kind {
             RealKind::Proxy => {

@@ -10,4 +10,5 @@ pub mod data;
 pub mod eval;
 pub mod model;
 pub mod render;
+pub mod train;
 pub mod util;

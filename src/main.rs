@@ -6,7 +6,10 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 
 use chicktrain::cli;
+use chicktrain::config::DeviceKind;
 use chicktrain::eval::IouType;
+use chicktrain::train::commands::{self, SplitName};
+use chicktrain::train::trainer::TrainOptions;
 
 /// Train instance segmentation of chicken carcass piles from real + rendered images.
 ///
@@ -31,25 +34,76 @@ struct TrainArgs {
     /// Write outputs here instead of runs/<name>/.
     #[arg(long)]
     run_dir: Option<PathBuf>,
+    /// Shrink the config to a ~1 minute run that still goes through every stage.
+    #[arg(long)]
+    smoke: bool,
+    /// Continue the run from <run dir>/last.bpk.
+    #[arg(long)]
+    resume: bool,
+    /// Override the config's device.
+    #[arg(long, value_enum)]
+    device: Option<DeviceArg>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum DeviceArg {
+    Flex,
+    Ndarray,
+}
+
+impl From<DeviceArg> for DeviceKind {
+    fn from(d: DeviceArg) -> DeviceKind {
+        match d {
+            DeviceArg::Flex => DeviceKind::Flex,
+            DeviceArg::Ndarray => DeviceKind::Ndarray,
+        }
+    }
+}
+
+impl TrainArgs {
+    fn run(self) -> anyhow::Result<String> {
+        let Some(c) = self.config else {
+            anyhow::bail!("train needs --config FILE (or a shipped name like quickstart.toml)")
+        };
+        let opts = TrainOptions {
+            run_dir: self.run_dir,
+            resume: self.resume,
+            smoke: self.smoke,
+            device: self.device.map(Into::into),
+            quiet: false,
+        };
+        cli::train(&c, &self.set, &opts)
+    }
 }
 
 #[derive(Subcommand)]
 enum Command {
     /// Train a model from a config (render, mix, train, evaluate every epoch, checkpoint).
     Train(TrainArgs),
-    /// Evaluate a checkpoint on a split (arrives with the trainer).
+    /// Evaluate a checkpoint on a split of the data it was trained with (COCO bbox + segm).
     Eval {
+        /// A best.bpk / last.bpk written by `train`.
         #[arg(long)]
         checkpoint: PathBuf,
+        #[arg(long, value_enum, default_value = "val")]
+        split: SplitName,
+        /// Print {"bbox": {"stats": [12]}, "segm": {"stats": [12]}}.
+        #[arg(long)]
+        json: bool,
+        #[arg(long, value_enum)]
+        device: Option<DeviceArg>,
     },
-    /// Predict masks on images with a checkpoint (arrives with the trainer).
+    /// Predict masks on an image or a folder of images: overlay PNGs + COCO results JSON.
     Predict {
         #[arg(long)]
         checkpoint: PathBuf,
+        /// An image file or a folder of .jpg/.png images.
         #[arg(long)]
         input: PathBuf,
         #[arg(long)]
         out: PathBuf,
+        #[arg(long, value_enum)]
+        device: Option<DeviceArg>,
     },
     /// Render auto-labelled carcass piles: images/, annotations.json (COCO), preview.png.
     Render {
@@ -142,22 +196,24 @@ enum ConvertWhat {
 }
 
 fn run(cli: Cli) -> anyhow::Result<String> {
-    let not_yet = |what: &str, issue: &str| -> anyhow::Result<String> {
-        anyhow::bail!("`chicktrain {what}` is not in this build yet (it arrives with the {issue})")
-    };
     match cli.command {
         None => match cli.train.config {
-            Some(c) => cli::train(&c, &cli.train.set, cli.train.run_dir),
+            Some(_) => cli.train.run(),
             None => anyhow::bail!("nothing to do: give --config FILE or a subcommand (see --help)"),
         },
-        Some(Command::Train(t)) => match t.config {
-            Some(c) => cli::train(&c, &t.set, t.run_dir),
-            None => {
-                anyhow::bail!("train needs --config FILE (or a shipped name like quickstart.toml)")
-            }
-        },
-        Some(Command::Eval { .. }) => not_yet("eval", "YOLO-seg trainer"),
-        Some(Command::Predict { .. }) => not_yet("predict", "YOLO-seg trainer"),
+        Some(Command::Train(t)) => t.run(),
+        Some(Command::Eval {
+            checkpoint,
+            split,
+            json,
+            device,
+        }) => commands::eval_cmd(&checkpoint, split, device.map(Into::into), json),
+        Some(Command::Predict {
+            checkpoint,
+            input,
+            out,
+            device,
+        }) => commands::predict_cmd(&checkpoint, &input, &out, device.map(Into::into)),
         Some(Command::Render {
             out,
             count,

@@ -1,0 +1,483 @@
+//! Training data sources: the "real" set (proxy-real renders, a COCO file + image folder,
+//! or a LabelMe folder) and the synthetic stream, both yielding [`Sample`]s at the
+//! network's square input size.
+//!
+//! The real set keeps its COCO ground truth at the *original* image size (that is what
+//! the evaluator scores against) and decodes images lazily, one per request, so a
+//! 300-photo set does not sit in memory. Images of any size are resized (stretched) to
+//! `image_size × image_size`; predictions are scaled back by the inverse factors. Gray,
+//! RGBA and 16-bit images are converted to RGB8. Missing or corrupt files fail with the
+//! file's path.
+//!
+//! Synthetic images come from the renderer (`render::stream::load_or_render`),
+//! deterministic per (seed, index), cached under the cache root; with `fresh_synthetic`
+//! the seed changes every epoch and nothing is cached.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use image::{imageops::FilterType, RgbImage};
+use rayon::prelude::*;
+
+use crate::config::{DataConfig, RealKind};
+use crate::data::coco::{CocoCategory, CocoDataset, CocoImage};
+use crate::data::labelme;
+use crate::data::mask::Mask;
+use crate::render::export::{annotations, visible_mask, CARCASS_CATEGORY};
+use crate::render::stream::{cache_key, effective_seed, load_or_render};
+use crate::render::{RenderOptions, RenderedSample};
+
+/// One instance of a training sample: class index (0-based, in category order) and its
+/// visible mask at the sample's size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instance {
+    pub class: usize,
+    pub mask: Mask,
+}
+
+/// An image at the network input size with its (non-crowd) instances.
+#[derive(Clone, Debug)]
+pub struct Sample {
+    pub image: RgbImage,
+    pub instances: Vec<Instance>,
+}
+
+/// Render options for a preset at `size`, with the label thresholds scaled to the image
+/// area so "too small to be a fair target" means the same at 96 px as at 640 px.
+pub fn render_options(proxy: bool, size: u32) -> RenderOptions {
+    let mut o = if proxy {
+        RenderOptions::proxy_real(size)
+    } else {
+        RenderOptions::synthetic(size)
+    };
+    let f = (size as f64 / 640.0).powi(2);
+    o.labels.min_visible_px = ((o.labels.min_visible_px as f64 * f).round() as u64).max(4);
+    o
+}
+
+/// Converts any decoded image (gray, RGBA, 16-bit, …) to RGB8.
+pub fn to_rgb8(img: image::DynamicImage) -> RgbImage {
+    match img {
+        image::DynamicImage::ImageRgb8(i) => i,
+        other => other.to_rgb8(),
+    }
+}
+
+/// Decodes an image file to RGB8, naming the file in every error.
+pub fn read_image(path: &Path) -> Result<RgbImage> {
+    if !path.exists() {
+        bail!("image file {} does not exist", path.display());
+    }
+    let img = image::ImageReader::open(path)
+        .with_context(|| format!("cannot open image {}", path.display()))?
+        .with_guessed_format()
+        .with_context(|| format!("cannot read image {}", path.display()))?
+        .decode()
+        .with_context(|| {
+            format!(
+                "cannot decode image {} (corrupt or unsupported)",
+                path.display()
+            )
+        })?;
+    Ok(to_rgb8(img))
+}
+
+/// Resizes a mask with nearest-neighbour sampling (pixel centres).
+pub fn resize_mask(m: &Mask, width: u32, height: u32) -> Mask {
+    if m.width == width && m.height == height {
+        return m.clone();
+    }
+    let mut out = Mask::new(height, width);
+    for y in 0..height {
+        let sy = (((y as f64 + 0.5) * m.height as f64 / height as f64) as u32).min(m.height - 1);
+        for x in 0..width {
+            let sx = (((x as f64 + 0.5) * m.width as f64 / width as f64) as u32).min(m.width - 1);
+            out.data[(y * width + x) as usize] = m.data[(sy * m.width + sx) as usize];
+        }
+    }
+    out
+}
+
+/// Where the real images come from.
+#[derive(Clone, Debug)]
+enum RealSource {
+    /// Proxy-real renders: image id `k + 1` is render index `k`.
+    Proxy {
+        opts: RenderOptions,
+        seed: u64,
+        cache: Option<PathBuf>,
+    },
+    /// Files; `file_name`s are relative to `root`.
+    Files { root: PathBuf },
+}
+
+/// The real dataset: COCO ground truth at original size plus a lazy image source.
+#[derive(Clone, Debug)]
+pub struct RealSet {
+    /// Ground truth of every image (original sizes), the evaluator's input.
+    pub gt: CocoDataset,
+    /// Category ids in class-index order (sorted by id).
+    pub cat_ids: Vec<u64>,
+    /// Network input size.
+    pub size: u32,
+    /// True for proxy-real renders (every report must call them a proxy).
+    pub proxy: bool,
+    source: RealSource,
+}
+
+impl RealSet {
+    /// Loads (for proxy: renders or reads from the cache `data.cache`) the real set of
+    /// `data`; `data.real.limit` keeps only the first N images (by id).
+    pub fn load(data: &DataConfig, seed: u64) -> Result<RealSet> {
+        let size = data.image_size;
+        let limit = data.real.limit;
+        let cache_root = Some(data.cache.as_path());
+        let real = &data.real;
+        let (mut gt, source) = match real.kind {
+            RealKind::Proxy => {
+                let opts = render_options(true, size);
+                let cache = match cache_root {
+                    Some(r) => Some(r.join(cache_key(&opts, seed)?)),
+                    None => None,
+                };
+                if let Some(c) = &cache {
+                    std::fs::create_dir_all(c)
+                        .with_context(|| format!("cannot create cache folder {}", c.display()))?;
+                }
+                let n = limit.map_or(real.count, |l| l.min(real.count));
+                let samples = render_many(&opts, seed, n as u64, cache.as_deref(), "proxy-real")?;
+                let mut ds = CocoDataset {
+                    info: Some(
+                        serde_json::json!({"description": "chicktrain proxy-real renders (a stand-in for real photos)"}),
+                    ),
+                    licenses: None,
+                    images: Vec::new(),
+                    annotations: Vec::new(),
+                    categories: vec![CocoCategory {
+                        id: CARCASS_CATEGORY,
+                        name: "carcass".into(),
+                        extra: Default::default(),
+                    }],
+                };
+                for (k, s) in samples.iter().enumerate() {
+                    let id = k as u64 + 1;
+                    ds.images.push(CocoImage {
+                        id,
+                        file_name: format!("proxy-real/{k:06}.jpg"),
+                        width: size,
+                        height: size,
+                        extra: Default::default(),
+                    });
+                    ds.annotations.extend(annotations(
+                        &s.ids,
+                        size,
+                        size,
+                        &s.instances,
+                        id,
+                        id * 1000,
+                    ));
+                }
+                (ds, RealSource::Proxy { opts, seed, cache })
+            }
+            RealKind::Coco => {
+                let ann = real
+                    .annotations
+                    .as_ref()
+                    .context("data.real.annotations is not set")?;
+                let ds = CocoDataset::load(ann)?;
+                let root = match &real.images {
+                    Some(d) => d.clone(),
+                    None => ann.parent().map(Path::to_path_buf).unwrap_or_default(),
+                };
+                (ds, RealSource::Files { root })
+            }
+            RealKind::Labelme => {
+                let dir = real.dir.as_ref().context("data.real.dir is not set")?;
+                let labels = real
+                    .labels
+                    .as_deref()
+                    .map(labelme::read_labels)
+                    .transpose()?;
+                let ds = labelme::load_dir(dir, labels.as_deref())?;
+                (ds, RealSource::Files { root: dir.clone() })
+            }
+        };
+        gt.validate().context("real dataset")?;
+        if let Some(l) = limit {
+            let mut ids: Vec<u64> = gt.images.iter().map(|i| i.id).collect();
+            ids.sort_unstable();
+            ids.truncate(l);
+            gt.images.retain(|i| ids.binary_search(&i.id).is_ok());
+            gt.annotations
+                .retain(|a| ids.binary_search(&a.image_id).is_ok());
+        }
+        if gt.images.len() < 3 {
+            bail!(
+                "the real dataset has {} images; at least 3 are needed (one per split)",
+                gt.images.len()
+            );
+        }
+        if gt.categories.is_empty() {
+            bail!("the real dataset has no categories");
+        }
+        let mut cat_ids: Vec<u64> = gt.categories.iter().map(|c| c.id).collect();
+        cat_ids.sort_unstable();
+        if let RealSource::Files { root } = &source {
+            // Fail early, naming the file, rather than in the middle of epoch 3.
+            for im in &gt.images {
+                let p = root.join(&im.file_name);
+                if !p.exists() {
+                    bail!(
+                        "image {} of the real dataset (id {}) does not exist",
+                        p.display(),
+                        im.id
+                    );
+                }
+            }
+        }
+        Ok(RealSet {
+            gt,
+            cat_ids,
+            size,
+            proxy: matches!(source, RealSource::Proxy { .. }),
+            source,
+        })
+    }
+
+    pub fn ids(&self) -> Vec<u64> {
+        self.gt.images.iter().map(|i| i.id).collect()
+    }
+
+    pub fn num_classes(&self) -> usize {
+        self.cat_ids.len()
+    }
+
+    pub fn class_names(&self) -> Vec<String> {
+        self.cat_ids
+            .iter()
+            .map(|id| {
+                self.gt
+                    .categories
+                    .iter()
+                    .find(|c| c.id == *id)
+                    .map(|c| c.name.clone())
+                    .unwrap_or_default()
+            })
+            .collect()
+    }
+
+    /// The image only, at the network input size, plus its original `(width, height)`.
+    pub fn image(&self, id: u64) -> Result<(RgbImage, (u32, u32))> {
+        let im = self
+            .gt
+            .image(id)
+            .with_context(|| format!("image id {id} is not in the real dataset"))?;
+        let img = match &self.source {
+            RealSource::Proxy { opts, seed, cache } => {
+                load_or_render(opts, *seed, id - 1, cache.as_deref())?.image
+            }
+            RealSource::Files { root } => {
+                let p = root.join(&im.file_name);
+                let img = read_image(&p)?;
+                if img.dimensions() != (im.width, im.height) {
+                    bail!(
+                        "image {} is {}x{} but its annotation says {}x{}",
+                        p.display(),
+                        img.width(),
+                        img.height(),
+                        im.width,
+                        im.height
+                    );
+                }
+                img
+            }
+        };
+        let orig = (im.width, im.height);
+        let img = if img.dimensions() == (self.size, self.size) {
+            img
+        } else {
+            image::imageops::resize(&img, self.size, self.size, FilterType::Triangle)
+        };
+        Ok((img, orig))
+    }
+
+    /// Image and non-crowd instances at the network input size.
+    pub fn sample(&self, id: u64) -> Result<Sample> {
+        let (image, (w, h)) = self.image(id)?;
+        let mut instances = Vec::new();
+        for a in self.gt.annotations.iter().filter(|a| a.image_id == id) {
+            if a.iscrowd != 0 {
+                continue;
+            }
+            let class = self.cat_ids.binary_search(&a.category_id).map_err(|_| {
+                anyhow::anyhow!("annotation {} has unknown category {}", a.id, a.category_id)
+            })?;
+            let rle = a
+                .segmentation
+                .to_rle(h, w)
+                .with_context(|| format!("annotation {} of image {id}", a.id))?;
+            let mask = resize_mask(&rle.decode(), self.size, self.size);
+            if mask.area() > 0 {
+                instances.push(Instance { class, mask });
+            }
+        }
+        Ok(Sample { image, instances })
+    }
+}
+
+/// Renders (or reads from `cache`) samples `0..n` in parallel, with a progress bar.
+fn render_many(
+    opts: &RenderOptions,
+    seed: u64,
+    n: u64,
+    cache: Option<&Path>,
+    what: &str,
+) -> Result<Vec<RenderedSample>> {
+    let bar = crate::train::progress::bar(n, what);
+    let out: Result<Vec<RenderedSample>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let s = load_or_render(opts, seed, i, cache)
+                .with_context(|| format!("rendering {what} image {i}"));
+            bar.inc(1);
+            s
+        })
+        .collect();
+    bar.finish_and_clear();
+    out
+}
+
+/// A rendered sample → training sample (ignored instances left out, like COCO crowds).
+pub fn from_rendered(s: &RenderedSample) -> Sample {
+    let (w, h) = s.image.dimensions();
+    let instances = s
+        .instances
+        .iter()
+        .filter(|i| !i.ignore)
+        .map(|i| Instance {
+            class: 0,
+            mask: visible_mask(&s.ids, w, h, i.id),
+        })
+        .collect();
+    Sample {
+        image: s.image.clone(),
+        instances,
+    }
+}
+
+/// The synthetic source: `count` images of the synthetic preset, a fixed cached set, or
+/// fresh renders every epoch.
+#[derive(Clone, Debug)]
+pub struct SyntheticSet {
+    pub count: usize,
+    pub fresh: bool,
+    opts: RenderOptions,
+    seed: u64,
+    cache_root: Option<PathBuf>,
+}
+
+impl SyntheticSet {
+    pub fn new(data: &DataConfig, seed: u64) -> SyntheticSet {
+        SyntheticSet {
+            count: data.synthetic,
+            fresh: data.fresh_synthetic,
+            opts: render_options(false, data.image_size),
+            seed,
+            cache_root: Some(data.cache.clone()),
+        }
+    }
+
+    fn cache_dir(&self, epoch: u64) -> Result<Option<PathBuf>> {
+        if self.fresh {
+            return Ok(None);
+        }
+        match &self.cache_root {
+            Some(r) => {
+                let d = r.join(cache_key(
+                    &self.opts,
+                    effective_seed(self.seed, epoch, false),
+                )?);
+                std::fs::create_dir_all(&d)
+                    .with_context(|| format!("cannot create cache folder {}", d.display()))?;
+                Ok(Some(d))
+            }
+            None => Ok(None),
+        }
+    }
+
+    /// Renders the fixed set once (no-op for fresh-per-epoch), so epoch 1 is not slow.
+    pub fn prepare(&self) -> Result<()> {
+        if self.fresh || self.count == 0 || self.cache_root.is_none() {
+            return Ok(());
+        }
+        let dir = self.cache_dir(0)?;
+        render_many(
+            &self.opts,
+            self.seed,
+            self.count as u64,
+            dir.as_deref(),
+            "synthetic",
+        )?;
+        Ok(())
+    }
+
+    /// Sample `index` as seen in `epoch`.
+    pub fn sample(&self, index: u64, epoch: u64) -> Result<Sample> {
+        let seed = effective_seed(self.seed, epoch, self.fresh);
+        let dir = self.cache_dir(epoch)?;
+        let s = load_or_render(&self.opts, seed, index, dir.as_deref())
+            .with_context(|| format!("rendering synthetic image {index}"))?;
+        Ok(from_rendered(&s))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resize_mask_nearest() {
+        let mut m = Mask::new(2, 2);
+        m.set(1, 0, true);
+        let r = resize_mask(&m, 4, 4);
+        assert_eq!(r.area(), 4);
+        assert!(r.get(2, 0) && r.get(3, 1) && !r.get(1, 0));
+    }
+
+    #[test]
+    fn reads_gray_and_rgba_and_names_bad_files() {
+        let dir = std::env::temp_dir().join(format!("ct-ds-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let g = image::GrayImage::from_pixel(3, 2, image::Luma([77]));
+        g.save(dir.join("g.png")).unwrap();
+        let a = image::RgbaImage::from_pixel(3, 2, image::Rgba([1, 2, 3, 4]));
+        a.save(dir.join("a.png")).unwrap();
+        let g16 = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(
+            2,
+            2,
+            image::Luma([65535]),
+        );
+        g16.save(dir.join("g16.png")).unwrap();
+        assert_eq!(
+            read_image(&dir.join("g.png")).unwrap().get_pixel(0, 0).0,
+            [77, 77, 77]
+        );
+        assert_eq!(
+            read_image(&dir.join("a.png")).unwrap().get_pixel(2, 1).0,
+            [1, 2, 3]
+        );
+        assert_eq!(
+            read_image(&dir.join("g16.png")).unwrap().get_pixel(1, 1).0,
+            [255, 255, 255]
+        );
+        std::fs::write(dir.join("bad.jpg"), b"not a jpeg").unwrap();
+        let e = format!("{:#}", read_image(&dir.join("bad.jpg")).unwrap_err());
+        assert!(e.contains("bad.jpg"), "{e}");
+        let e = format!("{:#}", read_image(&dir.join("missing.png")).unwrap_err());
+        assert!(
+            e.contains("missing.png") && e.contains("does not exist"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

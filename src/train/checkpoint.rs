@@ -1,0 +1,268 @@
+//! Checkpoint files (`best.bpk`, `last.bpk`): one self-contained file that `eval` and
+//! `predict` can use with no other file from the run.
+//!
+//! Layout: the magic line `CHICKTRAIN-CKPT1\n`, a little-endian u64 length and a JSON
+//! [`Header`] (model config, class names, the resolved run config, the split, epoch,
+//! validation stats), then named sections, each a u64 name length, the name, a u64 byte
+//! length and the bytes. Sections are Burn burnpack records: `ema` (the weights evaluated
+//! and used for inference — the EMA copy, or the model itself with EMA off), and in
+//! `last.bpk` also `model` (raw training weights) and `optim` (optimiser state) for
+//! `--resume`. Files are written atomically (temp + rename).
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use burn::module::Module;
+use burn::optim::ModuleOptimizer;
+use burn::store::ModuleRecord;
+use burn::tensor::{Bytes, Device};
+use serde::{Deserialize, Serialize};
+
+use crate::config::Config;
+use crate::data::split::Split;
+use crate::model::yolo::{YoloSeg, YoloSegConfig};
+
+const MAGIC: &[u8] = b"CHICKTRAIN-CKPT1\n";
+
+/// Validation (or test) COCO stats of a model, pycocotools order.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stats {
+    pub bbox: [f64; 12],
+    pub segm: [f64; 12],
+}
+
+/// Everything but the weights.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Header {
+    pub format: u32,
+    pub chicktrain: String,
+    pub model: YoloSegConfig,
+    /// COCO category ids in class-index order, and their names.
+    pub category_ids: Vec<u64>,
+    pub class_names: Vec<String>,
+    /// The resolved run config (data config included), so eval can rebuild the data.
+    pub config: Config,
+    pub split: Split,
+    /// True when the "real" images are proxy-real renders.
+    pub proxy: bool,
+    /// Epochs completed (1-based).
+    pub epoch: usize,
+    pub ema_updates: u64,
+    /// Best validation segm AP so far.
+    pub best_fitness: f64,
+    /// Validation stats of the `ema` weights after `epoch`.
+    pub val: Option<Stats>,
+}
+
+/// A checkpoint in memory.
+pub struct Checkpoint {
+    pub header: Header,
+    pub sections: Vec<(String, Vec<u8>)>,
+}
+
+/// Serialises a module's weights (burnpack).
+pub fn module_bytes<M: Module>(m: &M) -> Result<Vec<u8>> {
+    let b = m
+        .clone()
+        .into_record()
+        .into_bytes()
+        .map_err(|e| anyhow::anyhow!("cannot serialise weights: {e}"))?;
+    Ok(b.to_vec())
+}
+
+/// Serialises optimiser state (burnpack).
+pub fn optim_bytes(o: &ModuleOptimizer) -> Result<Vec<u8>> {
+    let b = o
+        .into_bytes()
+        .map_err(|e| anyhow::anyhow!("cannot serialise optimiser state: {e}"))?;
+    Ok(b.to_vec())
+}
+
+impl std::fmt::Debug for Checkpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Checkpoint")
+            .field("header", &self.header)
+            .field(
+                "sections",
+                &self
+                    .sections
+                    .iter()
+                    .map(|s| (&s.0, s.1.len()))
+                    .collect::<Vec<_>>(),
+            )
+            .finish()
+    }
+}
+
+impl Checkpoint {
+    pub fn to_bytes(&self) -> Result<Vec<u8>> {
+        let header = serde_json::to_vec(&self.header)?;
+        let mut b = Vec::with_capacity(
+            header.len() + self.sections.iter().map(|s| s.1.len() + 64).sum::<usize>(),
+        );
+        b.extend_from_slice(MAGIC);
+        b.extend_from_slice(&(header.len() as u64).to_le_bytes());
+        b.extend_from_slice(&header);
+        b.extend_from_slice(&(self.sections.len() as u64).to_le_bytes());
+        for (name, data) in &self.sections {
+            b.extend_from_slice(&(name.len() as u64).to_le_bytes());
+            b.extend_from_slice(name.as_bytes());
+            b.extend_from_slice(&(data.len() as u64).to_le_bytes());
+            b.extend_from_slice(data);
+        }
+        Ok(b)
+    }
+
+    pub fn save(&self, path: &Path) -> Result<()> {
+        crate::util::write_atomic(path, &self.to_bytes()?)
+    }
+
+    pub fn from_bytes(b: &[u8], origin: &Path) -> Result<Checkpoint> {
+        let bad = |what: &str| {
+            anyhow::anyhow!(
+                "{} is not a chicktrain checkpoint ({what})",
+                origin.display()
+            )
+        };
+        if !b.starts_with(MAGIC) {
+            return Err(bad("wrong magic"));
+        }
+        let mut r = Reader { b, at: MAGIC.len() };
+        let n = r.len().ok_or_else(|| bad("truncated"))?;
+        let header: Header = serde_json::from_slice(r.take(n).ok_or_else(|| bad("truncated"))?)
+            .with_context(|| format!("{}: unreadable checkpoint header", origin.display()))?;
+        let count = r.len().ok_or_else(|| bad("truncated"))?;
+        if count > 64 {
+            return Err(bad("too many sections"));
+        }
+        let mut sections = Vec::new();
+        for _ in 0..count {
+            let n = r.len().ok_or_else(|| bad("truncated"))?;
+            let name = r.take(n).ok_or_else(|| bad("truncated"))?;
+            let name = String::from_utf8(name.to_vec()).map_err(|_| bad("section name"))?;
+            let n = r.len().ok_or_else(|| bad("truncated"))?;
+            sections.push((name, r.take(n).ok_or_else(|| bad("truncated"))?.to_vec()));
+        }
+        Ok(Checkpoint { header, sections })
+    }
+
+    pub fn load(path: &Path) -> Result<Checkpoint> {
+        if !path.exists() {
+            bail!("checkpoint {} does not exist", path.display());
+        }
+        let b = std::fs::read(path)
+            .with_context(|| format!("cannot read checkpoint {}", path.display()))?;
+        Self::from_bytes(&b, path)
+    }
+
+    pub fn section(&self, name: &str) -> Option<&[u8]> {
+        self.sections
+            .iter()
+            .find(|s| s.0 == name)
+            .map(|s| s.1.as_slice())
+    }
+
+    /// Builds the model of the header on `device` and loads section `name` into it.
+    pub fn model(&self, name: &str, device: &Device) -> Result<YoloSeg> {
+        let data = self
+            .section(name)
+            .with_context(|| format!("checkpoint has no {name:?} weights"))?;
+        let model = self.header.model.init(device);
+        let rec = ModuleRecord::from_bytes(Bytes::from_bytes_vec(data.to_vec()))
+            .map_err(|e| anyhow::anyhow!("corrupt {name:?} weights in checkpoint: {e}"))?;
+        model.try_load_record(rec).map_err(|e| {
+            anyhow::anyhow!("{name:?} weights do not fit the model of the header: {e}")
+        })
+    }
+
+    /// Loads the optimiser state into `optim`.
+    pub fn optimizer(&self, optim: ModuleOptimizer) -> Result<ModuleOptimizer> {
+        let data = self
+            .section("optim")
+            .context("checkpoint has no optimiser state (only last.bpk has)")?;
+        optim
+            .from_bytes(Bytes::from_bytes_vec(data.to_vec()))
+            .map_err(|e| anyhow::anyhow!("corrupt optimiser state in checkpoint: {e}"))
+    }
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Option<&'a [u8]> {
+        let s = self.b.get(self.at..self.at.checked_add(n)?)?;
+        self.at += n;
+        Some(s)
+    }
+    fn len(&mut self) -> Option<usize> {
+        Some(u64::from_le_bytes(self.take(8)?.try_into().ok()?) as usize)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::split::Split;
+    use crate::model::yolo::Scale;
+    use burn::tensor::{Tensor, TensorData};
+
+    #[test]
+    fn round_trip_gives_the_same_outputs_and_bad_files_are_named() {
+        let dev = Device::flex();
+        let mcfg = YoloSegConfig::new(Scale::N, 1)
+            .with_input_size(32)
+            .with_width_mult(0.25)
+            .with_num_masks(4);
+        let model = mcfg.init(&dev);
+        let cfg = crate::config::parse(crate::config::SHIPPED[0].1, "q", &[]).unwrap();
+        let ck = Checkpoint {
+            header: Header {
+                format: 1,
+                chicktrain: "test".into(),
+                model: mcfg.clone(),
+                category_ids: vec![1],
+                class_names: vec!["carcass".into()],
+                config: cfg,
+                split: Split::new(&[1, 2, 3], [0.34, 0.33], 0).unwrap(),
+                proxy: true,
+                epoch: 4,
+                ema_updates: 9,
+                best_fitness: 0.5,
+                val: None,
+            },
+            sections: vec![("ema".into(), module_bytes(&model).unwrap())],
+        };
+        let dir = std::env::temp_dir().join(format!("ct-ckpt-{}", std::process::id()));
+        let p = dir.join("best.bpk");
+        ck.save(&p).unwrap();
+        let back = Checkpoint::load(&p).unwrap();
+        assert_eq!(back.header.epoch, 4);
+        assert_eq!(back.header.model, mcfg);
+        let loaded = back.model("ema", &dev).unwrap();
+        let x = Tensor::<4>::from_data(
+            TensorData::new(
+                (0..3 * 32 * 32)
+                    .map(|i| (i % 7) as f32 / 7.0)
+                    .collect::<Vec<_>>(),
+                [1, 3, 32, 32],
+            ),
+            &dev,
+        );
+        let a = model.forward(x.clone()).cls_logits.into_data();
+        let b = loaded.forward(x).cls_logits.into_data();
+        assert_eq!(a, b);
+        assert!(format!("{:#}", back.model("model", &dev).unwrap_err()).contains("no \"model\""));
+
+        let bytes = std::fs::read(&p).unwrap();
+        std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+        let e = format!("{:#}", Checkpoint::load(&p).unwrap_err());
+        assert!(e.contains("best.bpk") && e.contains("truncated"), "{e}");
+        std::fs::write(&p, b"hello").unwrap();
+        assert!(format!("{:#}", Checkpoint::load(&p).unwrap_err())
+            .contains("not a chicktrain checkpoint"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,245 @@
+//! The `train`, `eval` and `predict` commands as library functions returning the text
+//! the binary prints.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use burn::tensor::{Tensor, TensorData};
+use image::{imageops::FilterType, Rgb, RgbImage};
+use serde_json::json;
+
+use crate::config::{self, DeviceKind};
+use crate::data::coco::{save_results, Detection};
+use crate::data::dataset::{read_image, RealSet};
+use crate::model::yolo::postprocess::postprocess;
+use crate::render::export::instance_color;
+
+use super::checkpoint::{Checkpoint, Stats};
+use super::evaluate::{evaluate_ids, push_planes, to_coco, VAL_IOU, VAL_MAX_DET};
+use super::trainer::{device_of, train, TrainOptions, TrainSummary};
+
+/// Confidence threshold of `predict` (ultralytics' predict default).
+pub const PREDICT_CONF: f32 = 0.25;
+
+/// One line per COCO stat block, pycocotools names.
+pub fn stats_line(kind: &str, s: &[f64; 12]) -> String {
+    format!(
+        "{kind}: AP {:.4}  AP50 {:.4}  AP75 {:.4}  APs {:.4}  APm {:.4}  APl {:.4}  AR1 {:.4}  AR10 {:.4}  AR100 {:.4}",
+        s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8]
+    )
+}
+
+/// `chicktrain train` / `chicktrain --config X`.
+pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -> Result<String> {
+    let cfg = config::load(config_name, overrides)?;
+    let s: TrainSummary = train(cfg, opts)?;
+    Ok(format!(
+        "trained {} epochs in {:.1} s ({:.2} train img/s); best epoch {}; run files in {}\n\
+         test split ({} images{}), best.bpk:\n{}\n{}",
+        s.epochs,
+        s.seconds,
+        s.train_images_per_s,
+        s.best_epoch,
+        s.run_dir.display(),
+        s.test_images,
+        if s.proxy {
+            ", proxy-real renders standing in for real photos"
+        } else {
+            ""
+        },
+        stats_line("bbox", &s.test.bbox),
+        stats_line("segm", &s.test.segm)
+    ))
+}
+
+/// Which split `eval` scores.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SplitName {
+    Train,
+    Val,
+    Test,
+}
+
+/// `chicktrain eval --checkpoint X [--split val|test] [--json]`: rebuilds the data from the
+/// checkpoint's config and split, and scores the checkpoint's weights.
+pub fn eval_cmd(
+    checkpoint: &Path,
+    split: SplitName,
+    device: Option<DeviceKind>,
+    json_out: bool,
+) -> Result<String> {
+    let ck = Checkpoint::load(checkpoint)?;
+    let cfg = &ck.header.config;
+    let dev = device_of(device.unwrap_or(cfg.device));
+    let real = RealSet::load(&cfg.data, cfg.seed)
+        .with_context(|| format!("rebuilding the data of {}", checkpoint.display()))?;
+    if real.cat_ids != ck.header.category_ids {
+        bail!(
+            "the data's categories {:?} differ from the checkpoint's {:?}",
+            real.cat_ids,
+            ck.header.category_ids
+        );
+    }
+    let ids = match split {
+        SplitName::Train => &ck.header.split.train,
+        SplitName::Val => &ck.header.split.val,
+        SplitName::Test => &ck.header.split.test,
+    };
+    let model = ck.model("ema", &dev)?;
+    let (stats, _): (Stats, _) = evaluate_ids(&model, &real, ids, &dev)?;
+    if json_out {
+        return Ok(
+            json!({"bbox": {"stats": stats.bbox}, "segm": {"stats": stats.segm}}).to_string(),
+        );
+    }
+    Ok(format!(
+        "{} (epoch {}) on the {:?} split, {} images{}:\n{}\n{}",
+        checkpoint.display(),
+        ck.header.epoch,
+        split,
+        ids.len(),
+        if ck.header.proxy {
+            " [proxy-real renders, not real photos]"
+        } else {
+            ""
+        },
+        stats_line("bbox", &stats.bbox),
+        stats_line("segm", &stats.segm)
+    ))
+}
+
+fn list_images(input: &Path) -> Result<Vec<PathBuf>> {
+    if !input.exists() {
+        bail!("--input {} does not exist", input.display());
+    }
+    if input.is_file() {
+        return Ok(vec![input.to_path_buf()]);
+    }
+    let mut v: Vec<PathBuf> = std::fs::read_dir(input)
+        .with_context(|| format!("cannot read folder {}", input.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "jpg" | "jpeg" | "png"))
+        })
+        .collect();
+    v.sort();
+    if v.is_empty() {
+        bail!("no .jpg/.jpeg/.png images in {}", input.display());
+    }
+    Ok(v)
+}
+
+/// Draws masks (tinted), boxes and a score bar (length ∝ score, above each box; no font
+/// is embedded, the scores are in `results.json`).
+fn overlay(img: &RgbImage, dets: &[Detection]) -> Result<RgbImage> {
+    let mut out = img.clone();
+    let (w, h) = out.dimensions();
+    for (k, d) in dets.iter().enumerate() {
+        let c = instance_color(k as u16 + 1);
+        if let Some(seg) = &d.segmentation {
+            let m = seg.to_rle(h, w)?.decode();
+            for y in 0..h {
+                for x in 0..w {
+                    if m.get(x, y) {
+                        let p = out.get_pixel_mut(x, y);
+                        for i in 0..3 {
+                            p.0[i] = ((p.0[i] as u16 + c[i] as u16) / 2) as u8;
+                        }
+                    }
+                }
+            }
+        }
+        if let Some([bx, by, bw, bh]) = d.bbox {
+            let (x0, y0) = (bx.max(0.0) as u32, by.max(0.0) as u32);
+            let x1 = ((bx + bw) as u32).min(w.saturating_sub(1));
+            let y1 = ((by + bh) as u32).min(h.saturating_sub(1));
+            for x in x0..=x1 {
+                out.put_pixel(x, y0.min(h - 1), Rgb(c));
+                out.put_pixel(x, y1, Rgb(c));
+            }
+            for y in y0..=y1 {
+                out.put_pixel(x0.min(w - 1), y, Rgb(c));
+                out.put_pixel(x1, y, Rgb(c));
+            }
+            let len = ((x1.saturating_sub(x0)) as f64 * d.score) as u32;
+            for yy in y0.saturating_sub(4)..y0.saturating_sub(1) {
+                for x in x0..(x0 + len).min(w) {
+                    out.put_pixel(x, yy, Rgb(c));
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// `chicktrain predict --checkpoint X --input IMG_OR_DIR --out DIR`.
+pub fn predict_cmd(
+    checkpoint: &Path,
+    input: &Path,
+    out_dir: &Path,
+    device: Option<DeviceKind>,
+) -> Result<String> {
+    let ck = Checkpoint::load(checkpoint)?;
+    let dev = device_of(device.unwrap_or(ck.header.config.device));
+    let model = ck.model("ema", &dev)?;
+    let size = ck.header.model.input_size as u32;
+    let files = list_images(input)?;
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let mut all = Vec::new();
+    let mut images = Vec::new();
+    for (k, f) in files.iter().enumerate() {
+        let img = read_image(f)?;
+        let (w, h) = img.dimensions();
+        let small = if (w, h) == (size, size) {
+            img.clone()
+        } else {
+            image::imageops::resize(&img, size, size, FilterType::Triangle)
+        };
+        let mut px = Vec::new();
+        push_planes(&small, &mut px);
+        let x = Tensor::<4>::from_data(
+            TensorData::new(px, [1, 3, size as usize, size as usize]),
+            &dev,
+        );
+        let raw = postprocess(&model.forward(x), PREDICT_CONF, VAL_IOU, VAL_MAX_DET);
+        let id = k as u64 + 1;
+        let dets: Vec<Detection> = raw[0]
+            .iter()
+            .map(|d| to_coco(d, id, &ck.header.category_ids, size, (w, h)))
+            .collect();
+        let ov = overlay(&img, &dets)?;
+        let stem = f
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or(format!("{id}"));
+        let mut png = Vec::new();
+        image::ImageEncoder::write_image(
+            image::codecs::png::PngEncoder::new_with_quality(
+                &mut png,
+                image::codecs::png::CompressionType::Fast,
+                image::codecs::png::FilterType::Adaptive,
+            ),
+            ov.as_raw(),
+            w,
+            h,
+            image::ExtendedColorType::Rgb8,
+        )?;
+        crate::util::write_atomic(&out_dir.join(format!("{stem}.png")), &png)?;
+        images.push(json!({"id": id, "file_name": f.display().to_string(), "width": w, "height": h, "detections": dets.len()}));
+        all.extend(dets);
+    }
+    save_results(&out_dir.join("results.json"), &all)?;
+    crate::util::write_atomic(
+        &out_dir.join("images.json"),
+        serde_json::to_string_pretty(&json!({"images": images, "categories": ck.header.category_ids.iter().zip(&ck.header.class_names).map(|(i, n)| json!({"id": i, "name": n})).collect::<Vec<_>>()}))?.as_bytes(),
+    )?;
+    Ok(format!(
+        "{} images, {} detections (score > {PREDICT_CONF}); overlays, results.json (COCO results) and images.json (image ids) in {}",
+        files.len(),
+        all.len(),
+        out_dir.display()
+    ))
+}

@@ -1,0 +1,128 @@
+//! Exponential moving average of the weights (ultralytics `ModelEMA`): after every
+//! optimiser step, `ema = d·ema + (1 − d)·model` over every float tensor, BatchNorm running
+//! statistics included, with `d = 0.9999·(1 − exp(−updates / 2000))` so early updates
+//! follow the model closely. The EMA copy lives on the plain (non-autodiff) device in eval
+//! mode; it is what the trainer evaluates and saves in `best.bpk`.
+
+use std::collections::HashMap;
+
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
+use burn::tensor::Tensor;
+
+use crate::model::yolo::YoloSeg;
+
+/// Decay and ramp of ultralytics' `ModelEMA`.
+pub const DECAY: f64 = 0.9999;
+pub const TAU: f64 = 2000.0;
+
+pub struct Ema {
+    pub model: YoloSeg,
+    pub updates: u64,
+}
+
+struct Collect(HashMap<ParamId, Tensor<1>>);
+
+impl ModuleVisitor for Collect {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let t = param.val();
+        let n = t.shape().num_elements();
+        self.0.insert(param.id, t.reshape([n]));
+    }
+}
+
+struct Blend {
+    src: HashMap<ParamId, Tensor<1>>,
+    d: f64,
+}
+
+impl ModuleMapper for Blend {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let Some(s) = self.src.remove(&param.id) else {
+            return param;
+        };
+        let d = self.d;
+        param.map(|e| {
+            let dims = e.dims();
+            e.mul_scalar(d) + s.reshape(dims).mul_scalar(1.0 - d)
+        })
+    }
+}
+
+impl Ema {
+    /// Starts from a copy of `model` (eval mode, plain device).
+    pub fn new(model: &YoloSeg, updates: u64) -> Ema {
+        Ema {
+            model: model.valid(),
+            updates,
+        }
+    }
+
+    /// Decay used by the next update.
+    pub fn decay(updates: u64) -> f64 {
+        DECAY * (1.0 - (-(updates as f64) / TAU).exp())
+    }
+
+    /// Blends the current training weights in.
+    pub fn update(&mut self, model: &YoloSeg) {
+        self.updates += 1;
+        let d = Self::decay(self.updates);
+        let mut c = Collect(HashMap::new());
+        model.valid().visit(&mut c);
+        let m = self.model.clone();
+        self.model = m.map(&mut Blend { src: c.0, d });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::yolo::{Scale, YoloSegConfig};
+    use burn::tensor::Device;
+
+    fn first_weight(m: &YoloSeg) -> Vec<f32> {
+        struct First(Option<Vec<f32>>);
+        impl ModuleVisitor for First {
+            fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+                if self.0.is_none() {
+                    self.0 = Some(p.val().into_data().try_to_vec::<f32>().unwrap());
+                }
+            }
+        }
+        let mut f = First(None);
+        m.visit(&mut f);
+        f.0.unwrap()
+    }
+
+    #[test]
+    fn update_blends_with_the_ramped_decay() {
+        assert!(Ema::decay(1) < 0.001);
+        assert!((Ema::decay(1_000_000) - DECAY).abs() < 1e-9);
+        let dev = Device::flex();
+        let cfg = YoloSegConfig::new(Scale::N, 1)
+            .with_input_size(32)
+            .with_width_mult(0.25)
+            .with_num_masks(4);
+        dev.seed(1);
+        let a = cfg.init(&dev);
+        let mut ema = Ema::new(&a, 2999);
+        let e0 = first_weight(&ema.model);
+        // The trained model moves: a copy of `a` with every weight doubled.
+        struct Double;
+        impl ModuleMapper for Double {
+            fn map_float<const D: usize>(&mut self, p: Param<Tensor<D>>) -> Param<Tensor<D>> {
+                p.map(|t| t.mul_scalar(2.0))
+            }
+        }
+        let b = a.clone().map(&mut Double);
+        ema.update(&b);
+        assert_eq!(ema.updates, 3000);
+        let d = Ema::decay(3000) as f32;
+        for (e, x) in first_weight(&ema.model).iter().zip(&e0) {
+            let want = d * x + (1.0 - d) * 2.0 * x;
+            assert!(
+                (e - want).abs() <= 1e-5 * want.abs().max(1.0),
+                "{e} vs {want}"
+            );
+        }
+    }
+}
