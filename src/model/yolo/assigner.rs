@@ -195,7 +195,10 @@ pub fn assign_image(
             continue;
         }
         let row = &metric[g * na..(g + 1) * na];
-        order.sort_by(|&i, &j| row[j].total_cmp(&row[i]).then(i.cmp(&j)));
+        // A total order (metric descending, then index), so the selected set is unique.
+        if k > 0 && k < na {
+            order.select_nth_unstable_by(k - 1, |&i, &j| row[j].total_cmp(&row[i]).then(i.cmp(&j)));
+        }
         for &a in &order[..k] {
             mask_pos[g * na + a] = in_gts[g * na + a];
         }
