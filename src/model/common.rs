@@ -231,6 +231,7 @@ impl C3k {
 
 /// The inner block of a [`C3k2`]: a Bottleneck (`c3k = false`) or a two-bottleneck C3k.
 #[derive(Module, Debug)]
+#[allow(clippy::large_enum_variant)] // a handful per model; boxing buys nothing
 pub enum C3k2Inner {
     Bottleneck(Bottleneck),
     C3k(C3k),
@@ -363,7 +364,7 @@ pub struct Attention {
 impl Attention {
     pub fn new(dim: usize, num_heads: usize, device: &Device) -> Self {
         assert!(
-            num_heads > 0 && dim % num_heads == 0,
+            num_heads > 0 && dim.is_multiple_of(num_heads),
             "Attention: dim {dim} must be a positive multiple of num_heads {num_heads}"
         );
         let head_dim = dim / num_heads;

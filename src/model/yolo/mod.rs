@@ -88,7 +88,7 @@ impl YoloSegConfig {
             self.num_classes
         );
         assert!(
-            self.input_size >= 32 && self.input_size % 32 == 0,
+            self.input_size >= 32 && self.input_size.is_multiple_of(32),
             "YoloSegConfig: input_size must be a positive multiple of 32 (the largest stride), got {}",
             self.input_size
         );
