@@ -149,8 +149,8 @@ pub fn bench_yolo(
     let ad = device.clone().autodiff();
     let mut model = cfg.init(&ad);
 
-    // Inference.
-    let eval = model.valid();
+    // Inference (BatchNorm folded into the convs, as a deployed model would run).
+    let eval = model.valid().fuse();
     let (px, _) = synthetic_batch(infer_batch, size, 6, 1);
     let x = Tensor::<4>::from_data(TensorData::new(px, [infer_batch, 3, size, size]), device);
     let mut infer = Vec::new();
