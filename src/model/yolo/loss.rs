@@ -222,6 +222,15 @@ pub fn yolo_loss(out: &YoloOutput, targets: &YoloTargets, weights: &LossWeights)
         targets.images.len()
     );
     assert_eq!(na, out.grid.num_anchors(), "yolo_loss: anchors vs grid");
+    for (i, t) in targets.images.iter().enumerate() {
+        assert!(
+            t.boxes.len() == t.classes.len() && t.boxes.len() == t.masks.len(),
+            "yolo_loss: image {i} has {} boxes, {} classes and {} masks",
+            t.boxes.len(),
+            t.classes.len(),
+            t.masks.len()
+        );
+    }
     let points = out.grid.points();
     let strides = out.grid.strides();
     let level_strides: Vec<usize> = out.grid.levels.iter().map(|l| l.0).collect();
@@ -527,6 +536,29 @@ mod tests {
             CropWindow::new([-9.0, -9.0, -1.0, -1.0], [64, 64], [16, 16]),
             None
         );
+    }
+
+    #[test]
+    #[should_panic(expected = "image 0 has 1 boxes, 1 classes and 0 masks")]
+    fn loss_rejects_missing_masks() {
+        let d = Device::flex();
+        let grid = super::super::AnchorGrid::new([32, 32], &[8, 16, 32]);
+        let na = grid.num_anchors();
+        let out = YoloOutput {
+            box_dist: Tensor::zeros([1, 64, na], &d),
+            cls_logits: Tensor::zeros([1, 1, na], &d),
+            mask_coef: Tensor::zeros([1, 2, na], &d),
+            proto: Tensor::zeros([1, 2, 8, 8], &d),
+            grid,
+        };
+        let t = YoloTargets {
+            images: vec![ImageTargets {
+                boxes: vec![[0.0, 0.0, 8.0, 8.0]],
+                classes: vec![0],
+                masks: vec![],
+            }],
+        };
+        yolo_loss(&out, &t, &LossWeights::default());
     }
 
     #[test]

@@ -104,6 +104,11 @@ impl YoloSegConfig {
         );
     }
 
+    /// Parameter count and GFLOPs at `input_size` (builds the model once on flex).
+    pub fn summary(&self) -> ModelSummary {
+        self.init(&Device::flex()).summary(self.input_size)
+    }
+
     pub fn init(&self, device: &Device) -> YoloSeg {
         self.validate();
         let sc = Scaler::new(self.scale, self.width_mult);
