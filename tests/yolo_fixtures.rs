@@ -175,14 +175,16 @@ fn output_and_targets(case: &Value, dev: &Device) -> (YoloOutput, YoloTargets) {
     };
     let mut targets = YoloTargets::default();
     for img in images {
-        let mut t = ImageTargets::default();
-        t.boxes = img["boxes"].as_array().unwrap().iter().map(box4).collect();
-        t.classes = img["classes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_u64().unwrap() as usize)
-            .collect();
+        let mut t = ImageTargets {
+            boxes: img["boxes"].as_array().unwrap().iter().map(box4).collect(),
+            classes: img["classes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_u64().unwrap() as usize)
+                .collect(),
+            masks: Vec::new(),
+        };
         for m in img["proto_masks"].as_array().unwrap() {
             // The fixture's masks are at prototype resolution; replicate each cell 4×4.
             let small = floats(m);

@@ -143,3 +143,37 @@ fn finite_on_ndarray() {
     let dev = Device::ndarray().autodiff();
     assert_finite(&dev, &degenerate_batch(), &saturated, "ndarray ±1e4");
 }
+
+#[test]
+fn p4_p5_model_without_attention_trains_a_step() {
+    // Heads on strides 16 and 32 only (prototypes at 1/8), no C2PSA: the assigner's minimum
+    // GT side becomes 32 px and the mask loss runs at the coarser prototype grid.
+    use burn::tensor::TensorData;
+    use chicktrain::model::yolo::bench::synthetic_batch;
+    use chicktrain::model::yolo::{HeadLevels, Scale, YoloSegConfig};
+    let dev = Device::flex().autodiff();
+    dev.seed(5);
+    let model = YoloSegConfig::new(Scale::N, 1)
+        .with_input_size(64)
+        .with_width_mult(0.5)
+        .with_levels(HeadLevels::P4P5)
+        .with_c2psa(false)
+        .init(&dev);
+    let (px, targets) = synthetic_batch(2, 64, 3, 9);
+    let x = Tensor::<4>::from_data(TensorData::new(px, [2, 3, 64, 64]), &dev);
+    let out = model.forward(x);
+    assert_eq!(out.proto.dims()[2..], [8, 8]);
+    let loss = yolo_loss(&out, &targets, &LossWeights::default());
+    let v = loss.values();
+    assert!(loss.num_fg > 0 && v.iter().all(|x| x.is_finite()), "{v:?}");
+    assert!(v[3] > 0.0, "mask loss present: {v:?}");
+    let grads = loss.total.backward();
+    let g = model.head.coef[0]
+        .out
+        .weight
+        .val()
+        .grad(&grads)
+        .expect("coef head gradient");
+    let g = g.into_data().try_into_vec::<f32>().unwrap();
+    assert!(g.iter().all(|x| x.is_finite()) && g.iter().any(|&x| x != 0.0));
+}

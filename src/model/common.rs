@@ -78,6 +78,8 @@ pub struct ConvBn {
     pub bn: BatchNorm,
     /// SiLU after BN (`act=True`); false for the linear convs inside attention.
     pub act: bool,
+    /// BN folded into the conv (inference only, see [`ConvBn::fuse`]): `bn` is skipped.
+    pub fused: bool,
 }
 
 impl ConvBn {
@@ -108,7 +110,30 @@ impl ConvBn {
             .with_epsilon(BN_EPS)
             .with_momentum(BN_MOMENTUM)
             .init(device);
-        Self { conv, bn, act }
+        Self {
+            conv,
+            bn,
+            act,
+            fused: false,
+        }
+    }
+
+    /// Folds the BatchNorm (running statistics) into the conv's weight and bias, so that
+    /// inference skips one elementwise pass per conv. For eval-mode (`valid()`) models only:
+    /// the result no longer normalises by batch statistics.
+    pub fn fuse(mut self) -> Self {
+        if self.fused {
+            return self;
+        }
+        let co = self.out_channels();
+        let bn = &self.bn;
+        let scale = bn.gamma.val() / bn.running_var.value().add_scalar(bn.epsilon).sqrt();
+        let bias = bn.beta.val() - bn.running_mean.value() * scale.clone();
+        let weight = self.conv.weight.val() * scale.reshape([co, 1, 1, 1]);
+        self.conv.weight = Param::from_tensor(weight);
+        self.conv.bias = Some(Param::from_tensor(bias));
+        self.fused = true;
+        self
     }
 
     /// Plain `Conv(c_in, c_out, k, s)` with SiLU.
@@ -119,7 +144,8 @@ impl ConvBn {
     /// # Shapes
     /// - `x`: `[B, c_in, H, W]` → `[B, c_out, H', W']`, `H' = (H + 2(k/2) − k)/s + 1`
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = self.bn.forward(self.conv.forward(x));
+        let y = self.conv.forward(x);
+        let y = if self.fused { y } else { self.bn.forward(y) };
         if self.act {
             silu(y)
         } else {
@@ -185,6 +211,14 @@ impl Bottleneck {
     pub fn macs(&self, hw: [usize; 2]) -> u64 {
         self.cv1.macs(hw).0 + self.cv2.macs(hw).0
     }
+
+    pub fn fuse(self) -> Self {
+        Self {
+            cv1: self.cv1.fuse(),
+            cv2: self.cv2.fuse(),
+            ..self
+        }
+    }
 }
 
 /// CSP block with two parallel 1×1 paths and `n` 3×3 bottlenecks: ultralytics' `C3k`
@@ -227,10 +261,20 @@ impl C3k {
             + self.cv3.macs(hw).0
             + self.m.iter().map(|b| b.macs(hw)).sum::<u64>()
     }
+
+    pub fn fuse(self) -> Self {
+        Self {
+            cv1: self.cv1.fuse(),
+            cv2: self.cv2.fuse(),
+            cv3: self.cv3.fuse(),
+            m: self.m.into_iter().map(Bottleneck::fuse).collect(),
+        }
+    }
 }
 
 /// The inner block of a [`C3k2`]: a Bottleneck (`c3k = false`) or a two-bottleneck C3k.
 #[derive(Module, Debug)]
+#[allow(clippy::large_enum_variant)] // a handful per model; boxing buys nothing
 pub enum C3k2Inner {
     Bottleneck(Bottleneck),
     C3k(C3k),
@@ -248,6 +292,13 @@ impl C3k2Inner {
         match self {
             C3k2Inner::Bottleneck(b) => b.macs(hw),
             C3k2Inner::C3k(c) => c.macs(hw),
+        }
+    }
+
+    fn fuse(self) -> Self {
+        match self {
+            C3k2Inner::Bottleneck(b) => C3k2Inner::Bottleneck(b.fuse()),
+            C3k2Inner::C3k(c) => C3k2Inner::C3k(c.fuse()),
         }
     }
 }
@@ -308,6 +359,15 @@ impl C3k2 {
     pub fn macs(&self, hw: [usize; 2]) -> u64 {
         self.cv1.macs(hw).0 + self.cv2.macs(hw).0 + self.m.iter().map(|b| b.macs(hw)).sum::<u64>()
     }
+
+    pub fn fuse(self) -> Self {
+        Self {
+            cv1: self.cv1.fuse(),
+            cv2: self.cv2.fuse(),
+            m: self.m.into_iter().map(C3k2Inner::fuse).collect(),
+            c: self.c,
+        }
+    }
 }
 
 /// Spatial pyramid pooling, fast: 1×1 to c_in/2, three chained 5×5 stride-1 max pools,
@@ -346,6 +406,14 @@ impl Sppf {
     pub fn macs(&self, hw: [usize; 2]) -> u64 {
         self.cv1.macs(hw).0 + self.cv2.macs(hw).0
     }
+
+    pub fn fuse(self) -> Self {
+        Self {
+            cv1: self.cv1.fuse(),
+            cv2: self.cv2.fuse(),
+            pool: self.pool,
+        }
+    }
 }
 
 /// Multi-head self-attention over all positions of a feature map, with a depthwise 3×3
@@ -363,7 +431,7 @@ pub struct Attention {
 impl Attention {
     pub fn new(dim: usize, num_heads: usize, device: &Device) -> Self {
         assert!(
-            num_heads > 0 && dim % num_heads == 0,
+            num_heads > 0 && dim.is_multiple_of(num_heads),
             "Attention: dim {dim} must be a positive multiple of num_heads {num_heads}"
         );
         let head_dim = dim / num_heads;
@@ -409,6 +477,15 @@ impl Attention {
         let attn = heads * n * n * (self.key_dim + self.head_dim) as u64;
         self.qkv.macs(hw).0 + self.proj.macs(hw).0 + self.pe.macs(hw).0 + attn
     }
+
+    pub fn fuse(self) -> Self {
+        Self {
+            qkv: self.qkv.fuse(),
+            proj: self.proj.fuse(),
+            pe: self.pe.fuse(),
+            ..self
+        }
+    }
 }
 
 /// Attention + 2-layer 1×1 FFN, both residual: ultralytics' `PSABlock`.
@@ -437,6 +514,14 @@ impl PsaBlock {
 
     pub fn macs(&self, hw: [usize; 2]) -> u64 {
         self.attn.macs(hw) + self.ffn1.macs(hw).0 + self.ffn2.macs(hw).0
+    }
+
+    pub fn fuse(self) -> Self {
+        Self {
+            attn: self.attn.fuse(),
+            ffn1: self.ffn1.fuse(),
+            ffn2: self.ffn2.fuse(),
+        }
     }
 }
 
@@ -479,6 +564,15 @@ impl C2psa {
     pub fn macs(&self, hw: [usize; 2]) -> u64 {
         self.cv1.macs(hw).0 + self.cv2.macs(hw).0 + self.m.iter().map(|b| b.macs(hw)).sum::<u64>()
     }
+
+    pub fn fuse(self) -> Self {
+        Self {
+            cv1: self.cv1.fuse(),
+            cv2: self.cv2.fuse(),
+            m: self.m.into_iter().map(PsaBlock::fuse).collect(),
+            c: self.c,
+        }
+    }
 }
 
 /// Mask prototypes: 3×3 conv, 2× transposed conv, 3×3 conv, 1×1 conv to `n_masks` maps at
@@ -517,6 +611,15 @@ impl Proto {
         let up = (ci * co * kh * kw * hw[0] * hw[1]) as u64;
         let hw2 = [hw[0] * 2, hw[1] * 2];
         self.cv1.macs(hw).0 + up + self.cv2.macs(hw2).0 + self.cv3.macs(hw2).0
+    }
+
+    pub fn fuse(self) -> Self {
+        Self {
+            cv1: self.cv1.fuse(),
+            upsample: self.upsample,
+            cv2: self.cv2.fuse(),
+            cv3: self.cv3.fuse(),
+        }
     }
 }
 

@@ -195,7 +195,10 @@ pub fn assign_image(
             continue;
         }
         let row = &metric[g * na..(g + 1) * na];
-        order.sort_by(|&i, &j| row[j].total_cmp(&row[i]).then(i.cmp(&j)));
+        // A total order (metric descending, then index), so the selected set is unique.
+        if k > 0 && k < na {
+            order.select_nth_unstable_by(k - 1, |&i, &j| row[j].total_cmp(&row[i]).then(i.cmp(&j)));
+        }
         for &a in &order[..k] {
             mask_pos[g * na + a] = in_gts[g * na + a];
         }
@@ -290,7 +293,7 @@ mod tests {
         let anchors = grid(4, 8.0);
         let a = assign_image(
             &AssignerConfig::for_strides(&[8, 16]),
-            &vec![0.5; 16],
+            &[0.5; 16],
             &vec![[0.0, 0.0, 8.0, 8.0]; 16],
             &anchors,
             &[],
@@ -327,9 +330,8 @@ mod tests {
             (max - 1.0).abs() < 1e-5,
             "best anchor's target is maxIoU = 1, got {max}"
         );
-        for i in 0..na {
-            if a.fg[i] {
-                let p = anchors[i];
+        for (p, &fg) in anchors.iter().zip(&a.fg) {
+            if fg {
                 assert!(p[0] > 8.0 && p[0] < 40.0 && p[1] > 8.0 && p[1] < 40.0);
             }
         }

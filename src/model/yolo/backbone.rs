@@ -92,4 +92,21 @@ impl Backbone {
         let m10 = self.psa.as_ref().map_or(0, |p| p.macs(hw));
         m0 + m1 + m2 + m3 + m4 + m5 + m6 + m7 + m8 + m10
     }
+
+    /// Folds every BatchNorm into its conv (inference only; see `ConvBn::fuse`).
+    pub fn fuse(self) -> Self {
+        Self {
+            l0: self.l0.fuse(),
+            l1: self.l1.fuse(),
+            l2: self.l2.fuse(),
+            l3: self.l3.fuse(),
+            l4: self.l4.fuse(),
+            l5: self.l5.fuse(),
+            l6: self.l6.fuse(),
+            l7: self.l7.fuse(),
+            l8: self.l8.fuse(),
+            sppf: self.sppf.fuse(),
+            psa: self.psa.map(C2psa::fuse),
+        }
+    }
 }

@@ -100,7 +100,10 @@ pub struct BenchResult {
     pub input: usize,
     pub infer_batch: usize,
     pub train_batch: usize,
+    /// BatchNorm folded into the convs ([`super::YoloSeg::fuse`]).
     pub infer_ms_per_img: f64,
+    /// Same model without folding.
+    pub infer_unfused_ms_per_img: f64,
     pub train_ms_per_img: f64,
     /// Split of the train step, ms per image: forward, loss (assigner + losses), backward,
     /// optimiser step.
@@ -114,10 +117,11 @@ impl std::fmt::Display for BenchResult {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} px: inference {:.1} ms/img (batch {}); train {:.1} ms/img (batch {}: forward {:.1}, loss {:.1}, backward {:.1}, optimiser {:.1})",
+            "{} px: inference {:.1} ms/img (batch {}, BN folded; {:.1} unfolded); train {:.1} ms/img (batch {}: forward {:.1}, loss {:.1}, backward {:.1}, optimiser {:.1})",
             self.input,
             self.infer_ms_per_img,
             self.infer_batch,
+            self.infer_unfused_ms_per_img,
             self.train_ms_per_img,
             self.train_batch,
             self.forward_ms,
@@ -149,21 +153,28 @@ pub fn bench_yolo(
     let ad = device.clone().autodiff();
     let mut model = cfg.init(&ad);
 
-    // Inference.
-    let eval = model.valid();
+    // Inference, with BatchNorm folded into the convs (as a deployed model runs) and without;
+    // the two are interleaved so that load from other processes hits both alike.
+    let unfused = model.valid();
+    let fused = unfused.clone().fuse();
     let (px, _) = synthetic_batch(infer_batch, size, 6, 1);
     let x = Tensor::<4>::from_data(TensorData::new(px, [infer_batch, 3, size, size]), device);
-    let mut infer = Vec::new();
-    for r in 0..=runs {
+    let time_infer = |m: &super::YoloSeg| {
         let t0 = Instant::now();
-        let out = eval.forward(x.clone());
+        let out = m.forward(x.clone());
         let _ = super::loss::to_host(out.cls_logits);
         let _ = super::loss::to_host(out.proto);
+        t0.elapsed().as_secs_f64() * 1e3 / infer_batch as f64
+    };
+    let (mut infer, mut infer_unfused) = (Vec::new(), Vec::new());
+    for r in 0..=2 * runs {
+        let (a, b) = (time_infer(&fused), time_infer(&unfused));
         if r > 0 {
-            infer.push(t0.elapsed().as_secs_f64() * 1e3 / infer_batch as f64);
+            infer.push(a);
+            infer_unfused.push(b);
         }
     }
-    drop(eval);
+    drop((fused, unfused));
 
     // Training.
     let mut optim = SgdConfig::new()
@@ -206,6 +217,7 @@ pub fn bench_yolo(
         infer_batch,
         train_batch,
         infer_ms_per_img: median(infer),
+        infer_unfused_ms_per_img: median(infer_unfused),
         train_ms_per_img: median(tot),
         forward_ms: median(fw),
         loss_ms: median(ls),

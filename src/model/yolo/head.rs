@@ -163,6 +163,43 @@ impl SegmentHead {
         }
     }
 
+    /// Folds every BatchNorm into its conv (inference only; see `ConvBn::fuse`).
+    pub fn fuse(self) -> Self {
+        Self {
+            boxes: self
+                .boxes
+                .into_iter()
+                .map(|b| BoxBranch {
+                    c1: b.c1.fuse(),
+                    c2: b.c2.fuse(),
+                    out: b.out,
+                })
+                .collect(),
+            cls: self
+                .cls
+                .into_iter()
+                .map(|c| ClsBranch {
+                    dw1: c.dw1.fuse(),
+                    pw1: c.pw1.fuse(),
+                    dw2: c.dw2.fuse(),
+                    pw2: c.pw2.fuse(),
+                    out: c.out,
+                })
+                .collect(),
+            coef: self
+                .coef
+                .into_iter()
+                .map(|k| CoefBranch {
+                    c1: k.c1.fuse(),
+                    c2: k.c2.fuse(),
+                    out: k.out,
+                })
+                .collect(),
+            proto: self.proto.fuse(),
+            ..self
+        }
+    }
+
     /// MACs for level sizes `sizes[l] = [h, w]`.
     pub fn macs(&self, sizes: &[[usize; 2]]) -> u64 {
         let mut m = self.proto.macs(sizes[0]);

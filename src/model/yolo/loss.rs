@@ -222,6 +222,15 @@ pub fn yolo_loss(out: &YoloOutput, targets: &YoloTargets, weights: &LossWeights)
         targets.images.len()
     );
     assert_eq!(na, out.grid.num_anchors(), "yolo_loss: anchors vs grid");
+    for (i, t) in targets.images.iter().enumerate() {
+        assert!(
+            t.boxes.len() == t.classes.len() && t.boxes.len() == t.masks.len(),
+            "yolo_loss: image {i} has {} boxes, {} classes and {} masks",
+            t.boxes.len(),
+            t.classes.len(),
+            t.masks.len()
+        );
+    }
     let points = out.grid.points();
     let strides = out.grid.strides();
     let level_strides: Vec<usize> = out.grid.levels.iter().map(|l| l.0).collect();
@@ -393,6 +402,10 @@ fn box_losses(
 }
 
 /// Prototype mask loss (un-gained), `[1]`.
+///
+/// Positives assigned to the same GT share its crop window and its GT mask, so they are
+/// evaluated together and only inside that window (everything outside is cropped to zero
+/// weight anyway): `Σ_groups Σ_window bce(coef · proto, gt) / (Hp·Wp) / area / #positives`.
 fn mask_loss(
     out: &YoloOutput,
     targets: &YoloTargets,
@@ -405,108 +418,81 @@ fn mask_loss(
     let [ih, iw] = out.grid.input;
     let coef_rows = out.mask_coef.clone().swap_dims(1, 2).reshape([b * na, nm]);
     let num_fg = positives.len() as f32;
-    let mut total: Option<Tensor<1>> = None;
+    let mut total = Tensor::<1>::zeros([1], &device);
     for (i, t) in targets.images.iter().enumerate() {
-        let pos: Vec<&Positive> = positives.iter().filter(|q| q.image == i).collect();
-        if pos.is_empty() {
+        let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+        for q in positives.iter().filter(|q| q.image == i) {
+            groups.entry(q.gt).or_default().push(q.anchor);
+        }
+        if groups.is_empty() {
             continue;
         }
         let index_map = overlap_index_map(t, [ih, iw], [ph, pw]);
-        let inst: Vec<MaskInstance> = pos
-            .iter()
-            .map(|q| MaskInstance {
-                gt: q.gt,
-                box_px: assignments[i].target_boxes[q.anchor],
-            })
-            .collect();
-        let (gt, wt) = mask_targets(&index_map, &inst, [ih, iw], [ph, pw], num_fg);
-        let idx = host_index(pos.iter().map(|q| i * na + q.anchor).collect(), &device);
-        let coef = coef_rows.clone().select(0, idx); // [P_i, nm]
-        let proto = out.proto.clone().narrow(0, i, 1).reshape([nm, ph * pw]);
-        let l = single_mask_loss(coef, proto, gt, wt);
-        total = Some(match total {
-            Some(acc) => acc + l,
-            None => l,
-        });
-    }
-    total.expect("mask_loss called with positives")
-}
-
-/// A positive's mask target: GT index (into the image's instances) and GT box in pixels.
-#[derive(Debug, Clone, Copy)]
-pub struct MaskInstance {
-    pub gt: usize,
-    pub box_px: [f32; 4],
-}
-
-/// Host-built mask targets and per-pixel weights for one image's positives:
-/// `gt[k, p] = index_map[p] == gt_k + 1`; `weight[k, p] = crop_k(p) / (Hp·Wp) / area_k / norm`
-/// with the box scaled to prototype pixels and `area_k` its normalised area (clamped to one
-/// prototype pixel). Returns `([P, Hp·Wp], [P, Hp·Wp])` as flat vectors.
-pub fn mask_targets(
-    index_map: &[u16],
-    inst: &[MaskInstance],
-    input: [usize; 2],
-    proto: [usize; 2],
-    norm: f32,
-) -> (Vec<f32>, Vec<f32>) {
-    let [ih, iw] = input;
-    let [ph, pw] = proto;
-    let hw = ph * pw;
-    let mut gt = vec![0f32; inst.len() * hw];
-    let mut wt = vec![0f32; inst.len() * hw];
-    let min_area = 1.0 / hw as f32;
-    for (k, m) in inst.iter().enumerate() {
-        let nb = [
-            m.box_px[0] / iw as f32,
-            m.box_px[1] / ih as f32,
-            m.box_px[2] / iw as f32,
-            m.box_px[3] / ih as f32,
-        ];
-        let area = ((nb[2] - nb[0]) * (nb[3] - nb[1])).max(min_area);
-        let mb = [
-            nb[0] * pw as f32,
-            nb[1] * ph as f32,
-            nb[2] * pw as f32,
-            nb[3] * ph as f32,
-        ];
-        let w = 1.0 / hw as f32 / area / norm;
-        let label = (m.gt + 1) as u16;
-        for r in 0..ph {
-            let rf = r as f32;
-            let row_in = rf >= mb[1] && rf < mb[3];
-            for c in 0..pw {
-                let p = r * pw + c;
-                if index_map[p] == label {
-                    gt[k * hw + p] = 1.0;
-                }
-                let cf = c as f32;
-                if row_in && cf >= mb[0] && cf < mb[2] {
-                    wt[k * hw + p] = w;
+        let proto_i = out.proto.clone().narrow(0, i, 1).reshape([nm, ph, pw]);
+        for (gt, anchors) in groups {
+            let box_px = assignments[i].target_boxes[anchors[0]];
+            let Some(win) = CropWindow::new(box_px, [ih, iw], [ph, pw]) else {
+                continue;
+            };
+            let (h, w) = (win.rows.1 - win.rows.0, win.cols.1 - win.cols.0);
+            let label = (gt + 1) as u16;
+            let mut gt_row = Vec::with_capacity(h * w);
+            for r in win.rows.0..win.rows.1 {
+                for c in win.cols.0..win.cols.1 {
+                    gt_row.push(f32::from(index_map[r * pw + c] == label));
                 }
             }
+            let gt_row = host_tensor(gt_row, [1, h * w], &device);
+            let proto = proto_i
+                .clone()
+                .narrow(1, win.rows.0, h)
+                .narrow(2, win.cols.0, w)
+                .reshape([nm, h * w]);
+            let idx = host_index(anchors.iter().map(|&a| i * na + a).collect(), &device);
+            let coef = coef_rows.clone().select(0, idx); // [k, nm]
+            let pred = coef.matmul(proto); // [k, h·w]
+            let weight = 1.0 / (ph * pw) as f32 / win.area / num_fg;
+            total = total + bce_with_logits(pred, gt_row).sum().mul_scalar(weight);
         }
     }
-    (gt, wt)
+    total
 }
 
-/// `Σ bce(coef · proto, gt) · weight`.
-///
-/// # Shapes
-/// - `coef [P, nm]`, `proto [nm, HW]`, `gt`/`weight`: flat `[P · HW]` → `[1]`
-pub fn single_mask_loss(
-    coef: Tensor<2>,
-    proto: Tensor<2>,
-    gt: Vec<f32>,
-    weight: Vec<f32>,
-) -> Tensor<1> {
-    let device = coef.device();
-    let p = coef.dims()[0];
-    let hw = proto.dims()[1];
-    let pred = coef.matmul(proto); // [P, HW]
-    let gt = host_tensor(gt, [p, hw], &device);
-    let wt = host_tensor(weight, [p, hw], &device);
-    (bce_with_logits(pred, gt) * wt).sum().reshape([1])
+/// The prototype pixels inside a GT box (ultralytics `crop_mask`: column `c` is inside iff
+/// `x1 ≤ c < x2` with the box scaled to prototype pixels), and the box's normalised area.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CropWindow {
+    /// Half-open row range.
+    pub rows: (usize, usize),
+    /// Half-open column range.
+    pub cols: (usize, usize),
+    /// `w · h` of the box as a fraction of the image, clamped to one prototype pixel so that
+    /// boxes thinner than a prototype pixel cannot blow the weight up.
+    pub area: f32,
+}
+
+impl CropWindow {
+    /// `None` when no prototype pixel lies inside the box.
+    pub fn new(box_px: [f32; 4], [ih, iw]: [usize; 2], [ph, pw]: [usize; 2]) -> Option<Self> {
+        let nb = [
+            box_px[0] / iw as f32,
+            box_px[1] / ih as f32,
+            box_px[2] / iw as f32,
+            box_px[3] / ih as f32,
+        ];
+        let range = |lo: f32, hi: f32, n: usize| {
+            let a = (lo.max(0.0).ceil() as usize).min(n);
+            let b = (hi.max(0.0).ceil() as usize).min(n);
+            (a, b.max(a))
+        };
+        let cols = range(nb[0] * pw as f32, nb[2] * pw as f32, pw);
+        let rows = range(nb[1] * ph as f32, nb[3] * ph as f32, ph);
+        if cols.0 == cols.1 || rows.0 == rows.1 {
+            return None;
+        }
+        let area = ((nb[2] - nb[0]) * (nb[3] - nb[1])).max(1.0 / (ph * pw) as f32);
+        Some(Self { rows, cols, area })
+    }
 }
 
 #[cfg(test)]
@@ -528,6 +514,51 @@ mod tests {
         assert_eq!(m[0], 2, "shared pixel belongs to the small instance");
         assert_eq!(m[1], 1);
         assert_eq!(m[15], 0);
+    }
+
+    #[test]
+    fn crop_window_follows_crop_mask() {
+        // 64 px input, 16 px prototypes: box 4.8..20 px → 1.2..5 proto px → columns 2..5.
+        let w = CropWindow::new([4.8, 0.0, 20.0, 64.0], [64, 64], [16, 16]).unwrap();
+        assert_eq!(w.cols, (2, 5));
+        assert_eq!(w.rows, (0, 16));
+        // Thinner than a prototype pixel with no pixel inside: no window.
+        assert_eq!(
+            CropWindow::new([4.1, 0.0, 4.2, 64.0], [64, 64], [16, 16]),
+            None
+        );
+        // Zero-area boxes: none; out-of-image boxes: none.
+        assert_eq!(
+            CropWindow::new([8.0, 8.0, 8.0, 8.0], [64, 64], [16, 16]),
+            None
+        );
+        assert_eq!(
+            CropWindow::new([-9.0, -9.0, -1.0, -1.0], [64, 64], [16, 16]),
+            None
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "image 0 has 1 boxes, 1 classes and 0 masks")]
+    fn loss_rejects_missing_masks() {
+        let d = Device::flex();
+        let grid = super::super::AnchorGrid::new([32, 32], &[8, 16, 32]);
+        let na = grid.num_anchors();
+        let out = YoloOutput {
+            box_dist: Tensor::zeros([1, 64, na], &d),
+            cls_logits: Tensor::zeros([1, 1, na], &d),
+            mask_coef: Tensor::zeros([1, 2, na], &d),
+            proto: Tensor::zeros([1, 2, 8, 8], &d),
+            grid,
+        };
+        let t = YoloTargets {
+            images: vec![ImageTargets {
+                boxes: vec![[0.0, 0.0, 8.0, 8.0]],
+                classes: vec![0],
+                masks: vec![],
+            }],
+        };
+        yolo_loss(&out, &t, &LossWeights::default());
     }
 
     #[test]

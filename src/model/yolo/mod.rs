@@ -88,7 +88,7 @@ impl YoloSegConfig {
             self.num_classes
         );
         assert!(
-            self.input_size >= 32 && self.input_size % 32 == 0,
+            self.input_size >= 32 && self.input_size.is_multiple_of(32),
             "YoloSegConfig: input_size must be a positive multiple of 32 (the largest stride), got {}",
             self.input_size
         );
@@ -102,6 +102,11 @@ impl YoloSegConfig {
             "YoloSegConfig: width_mult must be finite and > 0, got {}",
             self.width_mult
         );
+    }
+
+    /// Parameter count and GFLOPs at `input_size` (builds the model once on flex).
+    pub fn summary(&self) -> ModelSummary {
+        self.init(&Device::flex()).summary(self.input_size)
     }
 
     pub fn init(&self, device: &Device) -> YoloSeg {
@@ -240,6 +245,18 @@ impl YoloSeg {
         }
     }
 
+    /// Inference copy with every BatchNorm folded into its conv (about one elementwise pass
+    /// less per conv). Takes an eval-mode model (`model.valid()`); the result must not be
+    /// trained.
+    pub fn fuse(self) -> Self {
+        Self {
+            backbone: self.backbone.fuse(),
+            neck: self.neck.fuse(),
+            head: self.head.fuse(),
+            strides: self.strides,
+        }
+    }
+
     pub fn num_classes(&self) -> usize {
         self.head.num_classes
     }
@@ -334,6 +351,44 @@ mod tests {
             let s0 = levels.strides()[0];
             assert_eq!(out.proto.dims(), [2, 8, 2 * 64 / s0, 2 * 96 / s0]);
         }
+    }
+
+    #[test]
+    fn fused_model_matches_eval_model() {
+        // Give the BatchNorms non-trivial running statistics with two train-mode passes.
+        let ad = Device::flex().autodiff();
+        ad.seed(1);
+        let m = YoloSegConfig::new(Scale::N, 2)
+            .with_width_mult(0.5)
+            .with_num_masks(8)
+            .init(&ad);
+        let x = Tensor::<4>::random([2, 3, 64, 64], burn::tensor::Distribution::Default, &ad);
+        for _ in 0..2 {
+            let out = m.forward(x.clone());
+            let _ = (out.cls_logits.sum() + out.proto.sum()).backward();
+        }
+        let eval = m.valid();
+        let xe = Tensor::<4>::from_data(x.into_data(), &Device::flex());
+        let a = eval.forward(xe.clone());
+        let b = eval.clone().fuse().forward(xe);
+        for (p, q) in [
+            (a.cls_logits, b.cls_logits),
+            (a.box_dist, b.box_dist),
+            (a.mask_coef, b.mask_coef),
+        ] {
+            let (p, q) = (loss::to_host(p), loss::to_host(q));
+            for (u, v) in p.iter().zip(&q) {
+                assert!((u - v).abs() <= 1e-3 * (1.0 + u.abs()), "{u} vs {v}");
+            }
+        }
+        let (p, q) = (loss::to_host(a.proto), loss::to_host(b.proto));
+        assert!(p
+            .iter()
+            .zip(&q)
+            .all(|(u, v)| (u - v).abs() <= 1e-3 * (1.0 + u.abs())));
+        // Running stats really moved, so the test compares something.
+        let rm = loss::to_host(eval.backbone.l0.bn.running_mean.value());
+        assert!(rm.iter().any(|v| v.abs() > 1e-4));
     }
 
     #[test]

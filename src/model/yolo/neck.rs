@@ -124,4 +124,18 @@ impl Neck {
         }
         m + self.down_p4.macs(at(16)).0 + self.bu_p5.macs(at(32))
     }
+
+    /// Folds every BatchNorm into its conv (inference only; see `ConvBn::fuse`).
+    pub fn fuse(self) -> Self {
+        Self {
+            td_p4: self.td_p4.fuse(),
+            p3: self.p3.map(|n| NeckP3 {
+                td_p3: n.td_p3.fuse(),
+                down_p3: n.down_p3.fuse(),
+                bu_p4: n.bu_p4.fuse(),
+            }),
+            down_p4: self.down_p4.fuse(),
+            bu_p5: self.bu_p5.fuse(),
+        }
+    }
 }

@@ -232,7 +232,7 @@ mod tests {
         let m = instance_mask(&[1.0], &proto, [4, 4], [16, 16], [2.0, 3.0, 9.5, 7.0]);
         for y in 0..16 {
             for x in 0..16 {
-                let inside = x >= 2 && (x as f32) < 9.5 && y >= 3 && y < 7;
+                let inside = x >= 2 && (x as f32) < 9.5 && (3..7).contains(&y);
                 assert_eq!(m[y * 16 + x] == 1, inside, "({x}, {y})");
             }
         }
