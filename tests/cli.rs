@@ -186,7 +186,7 @@ fn config_typos_and_bad_values_exit_2_with_the_key() {
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/quickstart.toml"),
     )
     .unwrap();
-    let typo = write(&d, "typo.toml", &base.replace("epochs = 10", "epoch = 10"));
+    let typo = write(&d, "typo.toml", &base.replacen("epochs = ", "epoch = ", 1));
     assert_clean_error(
         &run(&["--config", &typo]),
         &["typo.toml", "unknown field `epoch`"],
@@ -242,5 +242,82 @@ fn coco2yolo_writes_normalised_polygons() {
     assert!(std::fs::read_to_string(d.join("y/data.yaml"))
         .unwrap()
         .contains("0: carcass"));
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn train_eval_predict_bad_inputs_exit_2_naming_the_file() {
+    let d = tmp("trainbad");
+    let gt = write(
+        &d,
+        "gt.json",
+        r#"{"images": [{"id": 1, "file_name": "a.jpg", "width": 64, "height": 64},
+                       {"id": 2, "file_name": "b.jpg", "width": 64, "height": 64},
+                       {"id": 3, "file_name": "c.jpg", "width": 64, "height": 64}],
+            "categories": [{"id": 1, "name": "carcass"}],
+            "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "segmentation": [[10, 10, 40, 10, 40, 40]], "area": 450, "bbox": [10, 10, 30, 30], "iscrowd": 0}]}"#,
+    );
+    let cfg = write(
+        &d,
+        "coco.toml",
+        &format!(
+            "name = \"bad\"\n[data]\nreal = {{ kind = \"coco\", annotations = {gt:?} }}\nsplit = [0.34, 0.33]\nimage_size = 64\ncrop = 64\n[train]\nepochs = 1\nbatch = 2\n"
+        ),
+    );
+    let run_dir = d.join("run");
+    let rd = run_dir.to_str().unwrap();
+    // a.jpg is missing.
+    assert_clean_error(
+        &run(&["--config", &cfg, "--run-dir", rd]),
+        &["a.jpg", "does not exist"],
+    );
+    // All present, but b.jpg is not an image.
+    image::RgbImage::new(64, 64).save(d.join("a.jpg")).unwrap();
+    image::RgbImage::new(64, 64).save(d.join("c.jpg")).unwrap();
+    std::fs::write(d.join("b.jpg"), b"garbage").unwrap();
+    assert_clean_error(
+        &run(&[
+            "train",
+            "--config",
+            &cfg,
+            "--run-dir",
+            rd,
+            "--set",
+            "train.fliplr=0",
+        ]),
+        &["b.jpg", "decode"],
+    );
+    assert_clean_error(
+        &run(&["eval", "--checkpoint", d.join("none.bpk").to_str().unwrap()]),
+        &["none.bpk", "does not exist"],
+    );
+    let junk = write(&d, "junk.bpk", "not a checkpoint");
+    assert_clean_error(
+        &run(&["eval", "--checkpoint", &junk]),
+        &["junk.bpk", "not a chicktrain checkpoint"],
+    );
+    assert_clean_error(
+        &run(&[
+            "predict",
+            "--checkpoint",
+            &junk,
+            "--input",
+            ".",
+            "--out",
+            rd,
+        ]),
+        &["junk.bpk"],
+    );
+    let fresh = d.join("fresh");
+    assert_clean_error(
+        &run(&[
+            "--config",
+            &cfg,
+            "--run-dir",
+            fresh.to_str().unwrap(),
+            "--resume",
+        ]),
+        &["last.bpk", "nothing to resume"],
+    );
     std::fs::remove_dir_all(&d).unwrap();
 }

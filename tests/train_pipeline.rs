@@ -158,3 +158,23 @@ fn non_finite_loss_stops_with_a_clean_error() {
     assert!(e.contains("epoch") && e.contains("step"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// CI's check of every shipped config: `--smoke` goes through every stage.
+#[test]
+fn every_shipped_config_runs_in_smoke_mode() {
+    let dir = tmp("shipped");
+    for (name, _) in config::SHIPPED {
+        let ov = [format!("data.cache=\"{}\"", dir.join("cache").display())];
+        let cfg = config::load(name, &ov).unwrap();
+        let o = TrainOptions {
+            run_dir: Some(dir.join(name)),
+            smoke: true,
+            quiet: true,
+            ..Default::default()
+        };
+        let s = train(cfg, &o).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+        assert!(s.run_dir.join("test.json").is_file(), "{name}");
+        assert!(s.test.segm.iter().all(|v| v.is_finite()), "{name}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

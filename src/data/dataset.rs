@@ -145,7 +145,17 @@ impl RealSet {
                         .with_context(|| format!("cannot create cache folder {}", c.display()))?;
                 }
                 let n = limit.map_or(real.count, |l| l.min(real.count));
-                let samples = render_many(&opts, seed, n as u64, cache.as_deref(), "proxy-real")?;
+                let anns = render_many(
+                    &opts,
+                    seed,
+                    n as u64,
+                    cache.as_deref(),
+                    "proxy-real",
+                    |k, s| {
+                        let id = k + 1;
+                        annotations(&s.ids, size, size, &s.instances, id, id * 1000)
+                    },
+                )?;
                 let mut ds = CocoDataset {
                     info: Some(
                         serde_json::json!({"description": "chicktrain proxy-real renders (a stand-in for real photos)"}),
@@ -159,7 +169,7 @@ impl RealSet {
                         extra: Default::default(),
                     }],
                 };
-                for (k, s) in samples.iter().enumerate() {
+                for (k, a) in anns.into_iter().enumerate() {
                     let id = k as u64 + 1;
                     ds.images.push(CocoImage {
                         id,
@@ -168,14 +178,7 @@ impl RealSet {
                         height: size,
                         extra: Default::default(),
                     });
-                    ds.annotations.extend(annotations(
-                        &s.ids,
-                        size,
-                        size,
-                        &s.instances,
-                        id,
-                        id * 1000,
-                    ));
+                    ds.annotations.extend(a);
                 }
                 (ds, RealSource::Proxy { opts, seed, cache })
             }
@@ -325,22 +328,25 @@ impl RealSet {
     }
 }
 
-/// Renders (or reads from `cache`) samples `0..n` in parallel, with a progress bar.
-fn render_many(
+/// Renders (or reads from `cache`) samples `0..n` in parallel, with a progress bar,
+/// keeping only `keep(index, sample)` of each (a 1000-image set at 640 px would not fit
+/// in memory as whole samples).
+fn render_many<T: Send>(
     opts: &RenderOptions,
     seed: u64,
     n: u64,
     cache: Option<&Path>,
     what: &str,
-) -> Result<Vec<RenderedSample>> {
+    keep: impl Fn(u64, RenderedSample) -> T + Sync,
+) -> Result<Vec<T>> {
     let bar = crate::train::progress::bar(n, what);
-    let out: Result<Vec<RenderedSample>> = (0..n)
+    let out: Result<Vec<T>> = (0..n)
         .into_par_iter()
         .map(|i| {
             let s = load_or_render(opts, seed, i, cache)
-                .with_context(|| format!("rendering {what} image {i}"));
+                .with_context(|| format!("rendering {what} image {i}"))?;
             bar.inc(1);
-            s
+            Ok(keep(i, s))
         })
         .collect();
     bar.finish_and_clear();
@@ -417,6 +423,7 @@ impl SyntheticSet {
             self.count as u64,
             dir.as_deref(),
             "synthetic",
+            |_, _| (),
         )?;
         Ok(())
     }
