@@ -321,3 +321,81 @@ fn train_eval_predict_bad_inputs_exit_2_naming_the_file() {
     );
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// Ctrl-C during training writes last.bpk and exits 2 saying how to resume; --resume
+/// then continues from it.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_saves_last_checkpoint_and_resume_continues() {
+    let d = tmp("sigint");
+    let run_dir = d.join("run");
+    let cache = format!("data.cache=\"{}\"", d.join("cache").display());
+    let args = |epochs: &str| -> Vec<String> {
+        [
+            "--config",
+            "quickstart.toml",
+            "--run-dir",
+            run_dir.to_str().unwrap(),
+            "--set",
+            &cache,
+            "--set",
+            "data.image_size=64",
+            "--set",
+            "data.crop=64",
+            "--set",
+            "data.real.count=9",
+            "--set",
+            "data.synthetic=4",
+            "--set",
+            "train.batch=2",
+            "--set",
+            epochs,
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let child = bin()
+        .args(args("train.epochs=1000"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the first epoch is logged: the loop (and its handler) is running.
+    let t0 = std::time::Instant::now();
+    while !run_dir.join("metrics.jsonl").exists() {
+        assert!(
+            t0.elapsed().as_secs() < 120,
+            "training never reached epoch 1"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let ok = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let out = child.wait_with_output().unwrap();
+    assert_clean_error(&out, &["interrupted", "last.bpk", "--resume"]);
+    assert!(run_dir.join("last.bpk").is_file());
+    // Resume to a short end and finish normally.
+    let done = std::fs::read_to_string(run_dir.join("metrics.jsonl"))
+        .unwrap()
+        .lines()
+        .count();
+    let mut a = args(&format!("train.epochs={}", done + 1));
+    a.push("--resume".into());
+    let out = bin().args(&a).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines = std::fs::read_to_string(run_dir.join("metrics.jsonl"))
+        .unwrap()
+        .lines()
+        .count();
+    assert_eq!(lines, done + 1);
+    assert!(run_dir.join("test.json").is_file());
+    std::fs::remove_dir_all(&d).unwrap();
+}

@@ -32,6 +32,7 @@ pub fn stats_line(kind: &str, s: &[f64; 12]) -> String {
 /// `chicktrain train` / `chicktrain --config X`.
 pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -> Result<String> {
     let cfg = config::load(config_name, overrides)?;
+    super::interrupt::install();
     let s: TrainSummary = train(cfg, opts)?;
     Ok(format!(
         "trained {} epochs in {:.1} s ({:.2} train img/s); best epoch {}; run files in {}\n\
