@@ -81,13 +81,25 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     assert_eq!(test["bbox"]["stats"], serde_json::json!(s.test.bbox));
 
     // eval of best.bpk reproduces test.json from the checkpoint alone.
-    let out = eval_cmd(&run.join("best.bpk"), SplitName::Test, None, true).unwrap();
+    let out = eval_cmd(&run.join("best.bpk"), SplitName::Test, None, None, true).unwrap();
     let ev: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(ev["bbox"]["stats"], test["bbox"]["stats"]);
     assert_eq!(ev["segm"]["stats"], test["segm"]["stats"]);
+    // --data with the run's own resolved config rebuilds the same data and split.
+    let own = run.join("config.toml");
+    let out = eval_cmd(
+        &run.join("best.bpk"),
+        SplitName::Test,
+        Some(own.to_str().unwrap()),
+        None,
+        true,
+    )
+    .unwrap();
+    let ev2: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(ev2["segm"]["stats"], test["segm"]["stats"]);
     // ... and the logged validation stats of its epoch.
     let best_epoch = test["epoch"].as_u64().unwrap() as usize;
-    let out = eval_cmd(&run.join("best.bpk"), SplitName::Val, None, true).unwrap();
+    let out = eval_cmd(&run.join("best.bpk"), SplitName::Val, None, None, true).unwrap();
     let ev: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(
         ev["segm"]["stats"],

@@ -531,6 +531,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             "train_time": t_train,
             "images_per_s": (seen * bsz).min(n_items) as f64 / t_train.max(1e-9),
             "val": stats_json(&val),
+            "proxy": real.proxy,
         });
         records.push(rec);
         write_metrics(&run_dir, &records)?;
