@@ -87,6 +87,9 @@ enum Command {
         checkpoint: PathBuf,
         #[arg(long, value_enum, default_value = "val")]
         split: SplitName,
+        /// Evaluate on the real data of this config instead of the checkpoint's own.
+        #[arg(long, value_name = "CONFIG")]
+        data: Option<String>,
         /// Print {"bbox": {"stats": [12]}, "segm": {"stats": [12]}}.
         #[arg(long)]
         json: bool,
@@ -205,9 +208,16 @@ fn run(cli: Cli) -> anyhow::Result<String> {
         Some(Command::Eval {
             checkpoint,
             split,
+            data,
             json,
             device,
-        }) => commands::eval_cmd(&checkpoint, split, device.map(Into::into), json),
+        }) => commands::eval_cmd(
+            &checkpoint,
+            split,
+            data.as_deref(),
+            device.map(Into::into),
+            json,
+        ),
         Some(Command::Predict {
             checkpoint,
             input,

@@ -186,7 +186,7 @@ fn config_typos_and_bad_values_exit_2_with_the_key() {
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/quickstart.toml"),
     )
     .unwrap();
-    let typo = write(&d, "typo.toml", &base.replace("epochs = 10", "epoch = 10"));
+    let typo = write(&d, "typo.toml", &base.replacen("epochs = ", "epoch = ", 1));
     assert_clean_error(
         &run(&["--config", &typo]),
         &["typo.toml", "unknown field `epoch`"],
@@ -331,5 +331,160 @@ fn coco2yolo_matches_ultralytics_byte_for_byte() {
         n += 1;
     }
     assert_eq!(n, 6);
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn train_eval_predict_bad_inputs_exit_2_naming_the_file() {
+    let d = tmp("trainbad");
+    let gt = write(
+        &d,
+        "gt.json",
+        r#"{"images": [{"id": 1, "file_name": "a.jpg", "width": 64, "height": 64},
+                       {"id": 2, "file_name": "b.jpg", "width": 64, "height": 64},
+                       {"id": 3, "file_name": "c.jpg", "width": 64, "height": 64}],
+            "categories": [{"id": 1, "name": "carcass"}],
+            "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "segmentation": [[10, 10, 40, 10, 40, 40]], "area": 450, "bbox": [10, 10, 30, 30], "iscrowd": 0}]}"#,
+    );
+    let cfg = write(
+        &d,
+        "coco.toml",
+        &format!(
+            "name = \"bad\"\n[data]\nreal = {{ kind = \"coco\", annotations = {gt:?} }}\nsplit = [0.34, 0.33]\nimage_size = 64\ncrop = 64\n[train]\nepochs = 1\nbatch = 2\n"
+        ),
+    );
+    let run_dir = d.join("run");
+    let rd = run_dir.to_str().unwrap();
+    // a.jpg is missing.
+    assert_clean_error(
+        &run(&["--config", &cfg, "--run-dir", rd]),
+        &["a.jpg", "does not exist"],
+    );
+    // All present, but b.jpg is not an image.
+    image::RgbImage::new(64, 64).save(d.join("a.jpg")).unwrap();
+    image::RgbImage::new(64, 64).save(d.join("c.jpg")).unwrap();
+    std::fs::write(d.join("b.jpg"), b"garbage").unwrap();
+    assert_clean_error(
+        &run(&[
+            "train",
+            "--config",
+            &cfg,
+            "--run-dir",
+            rd,
+            "--set",
+            "train.fliplr=0",
+        ]),
+        &["b.jpg", "decode"],
+    );
+    assert_clean_error(
+        &run(&["eval", "--checkpoint", d.join("none.bpk").to_str().unwrap()]),
+        &["none.bpk", "does not exist"],
+    );
+    let junk = write(&d, "junk.bpk", "not a checkpoint");
+    assert_clean_error(
+        &run(&["eval", "--checkpoint", &junk]),
+        &["junk.bpk", "not a chicktrain checkpoint"],
+    );
+    assert_clean_error(
+        &run(&[
+            "predict",
+            "--checkpoint",
+            &junk,
+            "--input",
+            ".",
+            "--out",
+            rd,
+        ]),
+        &["junk.bpk"],
+    );
+    let fresh = d.join("fresh");
+    assert_clean_error(
+        &run(&[
+            "--config",
+            &cfg,
+            "--run-dir",
+            fresh.to_str().unwrap(),
+            "--resume",
+        ]),
+        &["last.bpk", "nothing to resume"],
+    );
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// Ctrl-C during training writes last.bpk and exits 2 saying how to resume; --resume
+/// then continues from it.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_saves_last_checkpoint_and_resume_continues() {
+    let d = tmp("sigint");
+    let run_dir = d.join("run");
+    let cache = format!("data.cache=\"{}\"", d.join("cache").display());
+    let args = |epochs: &str| -> Vec<String> {
+        [
+            "--config",
+            "quickstart.toml",
+            "--run-dir",
+            run_dir.to_str().unwrap(),
+            "--set",
+            &cache,
+            "--set",
+            "data.image_size=64",
+            "--set",
+            "data.crop=64",
+            "--set",
+            "data.real.count=9",
+            "--set",
+            "data.synthetic=4",
+            "--set",
+            "train.batch=2",
+            "--set",
+            epochs,
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let child = bin()
+        .args(args("train.epochs=1000"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the first epoch is logged: the loop (and its handler) is running.
+    let t0 = std::time::Instant::now();
+    while !run_dir.join("metrics.jsonl").exists() {
+        assert!(
+            t0.elapsed().as_secs() < 120,
+            "training never reached epoch 1"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let ok = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let out = child.wait_with_output().unwrap();
+    assert_clean_error(&out, &["interrupted", "last.bpk", "--resume"]);
+    assert!(run_dir.join("last.bpk").is_file());
+    // Resume to a short end and finish normally.
+    let done = std::fs::read_to_string(run_dir.join("metrics.jsonl"))
+        .unwrap()
+        .lines()
+        .count();
+    let mut a = args(&format!("train.epochs={}", done + 1));
+    a.push("--resume".into());
+    let out = bin().args(&a).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines = std::fs::read_to_string(run_dir.join("metrics.jsonl"))
+        .unwrap()
+        .lines()
+        .count();
+    assert_eq!(lines, done + 1);
+    assert!(run_dir.join("test.json").is_file());
     std::fs::remove_dir_all(&d).unwrap();
 }

@@ -81,13 +81,25 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     assert_eq!(test["bbox"]["stats"], serde_json::json!(s.test.bbox));
 
     // eval of best.bpk reproduces test.json from the checkpoint alone.
-    let out = eval_cmd(&run.join("best.bpk"), SplitName::Test, None, true).unwrap();
+    let out = eval_cmd(&run.join("best.bpk"), SplitName::Test, None, None, true).unwrap();
     let ev: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(ev["bbox"]["stats"], test["bbox"]["stats"]);
     assert_eq!(ev["segm"]["stats"], test["segm"]["stats"]);
+    // --data with the run's own resolved config rebuilds the same data and split.
+    let own = run.join("config.toml");
+    let out = eval_cmd(
+        &run.join("best.bpk"),
+        SplitName::Test,
+        Some(own.to_str().unwrap()),
+        None,
+        true,
+    )
+    .unwrap();
+    let ev2: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(ev2["segm"]["stats"], test["segm"]["stats"]);
     // ... and the logged validation stats of its epoch.
     let best_epoch = test["epoch"].as_u64().unwrap() as usize;
-    let out = eval_cmd(&run.join("best.bpk"), SplitName::Val, None, true).unwrap();
+    let out = eval_cmd(&run.join("best.bpk"), SplitName::Val, None, None, true).unwrap();
     let ev: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(
         ev["segm"]["stats"],
@@ -156,5 +168,25 @@ fn non_finite_loss_stops_with_a_clean_error() {
     let e = format!("{:#}", train(cfg, &opts(&dir)).unwrap_err());
     assert!(e.contains("non-finite"), "{e}");
     assert!(e.contains("epoch") && e.contains("step"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// CI's check of every shipped config: `--smoke` goes through every stage.
+#[test]
+fn every_shipped_config_runs_in_smoke_mode() {
+    let dir = tmp("shipped");
+    for (name, _) in config::SHIPPED {
+        let ov = [format!("data.cache=\"{}\"", dir.join("cache").display())];
+        let cfg = config::load(name, &ov).unwrap();
+        let o = TrainOptions {
+            run_dir: Some(dir.join(name)),
+            smoke: true,
+            quiet: true,
+            ..Default::default()
+        };
+        let s = train(cfg, &o).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+        assert!(s.run_dir.join("test.json").is_file(), "{name}");
+        assert!(s.test.segm.iter().all(|v| v.is_finite()), "{name}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -145,7 +145,17 @@ impl RealSet {
                         .with_context(|| format!("cannot create cache folder {}", c.display()))?;
                 }
                 let n = limit.map_or(real.count, |l| l.min(real.count));
-                let samples = render_many(&opts, seed, n as u64, cache.as_deref(), "proxy-real")?;
+                let anns = render_many(
+                    &opts,
+                    seed,
+                    n as u64,
+                    cache.as_deref(),
+                    "proxy-real",
+                    |k, s| {
+                        let id = k + 1;
+                        annotations(&s.ids, size, size, &s.instances, id, id * 1000)
+                    },
+                )?;
                 let mut ds = CocoDataset {
                     info: Some(
                         serde_json::json!({"description": "chicktrain proxy-real renders (a stand-in for real photos)"}),
@@ -159,7 +169,7 @@ impl RealSet {
                         extra: Default::default(),
                     }],
                 };
-                for (k, s) in samples.iter().enumerate() {
+                for (k, a) in anns.into_iter().enumerate() {
                     let id = k as u64 + 1;
                     ds.images.push(CocoImage {
                         id,
@@ -168,14 +178,7 @@ impl RealSet {
                         height: size,
                         extra: Default::default(),
                     });
-                    ds.annotations.extend(annotations(
-                        &s.ids,
-                        size,
-                        size,
-                        &s.instances,
-                        id,
-                        id * 1000,
-                    ));
+                    ds.annotations.extend(a);
                 }
                 (ds, RealSource::Proxy { opts, seed, cache })
             }
@@ -325,22 +328,25 @@ impl RealSet {
     }
 }
 
-/// Renders (or reads from `cache`) samples `0..n` in parallel, with a progress bar.
-fn render_many(
+/// Renders (or reads from `cache`) samples `0..n` in parallel, with a progress bar,
+/// keeping only `keep(index, sample)` of each (a 1000-image set at 640 px would not fit
+/// in memory as whole samples).
+fn render_many<T: Send>(
     opts: &RenderOptions,
     seed: u64,
     n: u64,
     cache: Option<&Path>,
     what: &str,
-) -> Result<Vec<RenderedSample>> {
+    keep: impl Fn(u64, RenderedSample) -> T + Sync,
+) -> Result<Vec<T>> {
     let bar = crate::train::progress::bar(n, what);
-    let out: Result<Vec<RenderedSample>> = (0..n)
+    let out: Result<Vec<T>> = (0..n)
         .into_par_iter()
         .map(|i| {
             let s = load_or_render(opts, seed, i, cache)
-                .with_context(|| format!("rendering {what} image {i}"));
+                .with_context(|| format!("rendering {what} image {i}"))?;
             bar.inc(1);
-            s
+            Ok(keep(i, s))
         })
         .collect();
     bar.finish_and_clear();
@@ -417,6 +423,7 @@ impl SyntheticSet {
             self.count as u64,
             dir.as_deref(),
             "synthetic",
+            |_, _| (),
         )?;
         Ok(())
     }
@@ -477,6 +484,73 @@ mod tests {
         assert!(
             e.contains("missing.png") && e.contains("does not exist"),
             "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    fn tiny_data(dir: &Path, fresh: bool) -> DataConfig {
+        let cfg = crate::config::parse(
+            crate::config::SHIPPED[0].1,
+            "q",
+            &[
+                format!("data.cache=\"{}\"", dir.display()),
+                "data.image_size=64".into(),
+                "data.crop=64".into(),
+                "data.real.count=4".into(),
+                "data.synthetic=2".into(),
+                format!("data.fresh_synthetic={fresh}"),
+            ],
+        )
+        .unwrap();
+        cfg.data
+    }
+
+    #[test]
+    fn proxy_real_set_matches_its_ground_truth() {
+        let dir = std::env::temp_dir().join(format!("ct-ds-proxy-{}", std::process::id()));
+        let data = tiny_data(&dir, false);
+        let set = RealSet::load(&data, 5).unwrap();
+        assert!(set.proxy);
+        assert_eq!(set.ids(), vec![1, 2, 3, 4]);
+        assert_eq!(set.cat_ids, vec![CARCASS_CATEGORY]);
+        for id in set.ids() {
+            let s = set.sample(id).unwrap();
+            assert_eq!(s.image.dimensions(), (64, 64));
+            let gt: Vec<Mask> = set
+                .gt
+                .annotations
+                .iter()
+                .filter(|a| a.image_id == id && a.iscrowd == 0)
+                .map(|a| a.segmentation.to_rle(64, 64).unwrap().decode())
+                .collect();
+            assert_eq!(s.instances.len(), gt.len());
+            for (i, g) in s.instances.iter().zip(&gt) {
+                assert_eq!(&i.mask, g);
+            }
+        }
+        // Reloading reads the cache and gives the same ground truth.
+        let again = RealSet::load(&data, 5).unwrap();
+        assert_eq!(again.gt.annotations.len(), set.gt.annotations.len());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn synthetic_fixed_set_repeats_and_fresh_set_changes_per_epoch() {
+        let dir = std::env::temp_dir().join(format!("ct-ds-syn-{}", std::process::id()));
+        let fixed = SyntheticSet::new(&tiny_data(&dir, false), 5);
+        fixed.prepare().unwrap();
+        assert_eq!(
+            fixed.sample(1, 0).unwrap().image,
+            fixed.sample(1, 3).unwrap().image
+        );
+        let fresh = SyntheticSet::new(&tiny_data(&dir, true), 5);
+        assert_ne!(
+            fresh.sample(1, 0).unwrap().image,
+            fresh.sample(1, 1).unwrap().image
+        );
+        assert_eq!(
+            fresh.sample(1, 2).unwrap().image,
+            fresh.sample(1, 2).unwrap().image
         );
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -11,6 +11,7 @@ use serde_json::json;
 use crate::config::{self, DeviceKind};
 use crate::data::coco::{save_results, Detection};
 use crate::data::dataset::{read_image, RealSet};
+use crate::data::split::Split;
 use crate::model::yolo::postprocess::postprocess;
 use crate::render::export::instance_color;
 
@@ -32,6 +33,7 @@ pub fn stats_line(kind: &str, s: &[f64; 12]) -> String {
 /// `chicktrain train` / `chicktrain --config X`.
 pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -> Result<String> {
     let cfg = config::load(config_name, overrides)?;
+    super::interrupt::install();
     let s: TrainSummary = train(cfg, opts)?;
     Ok(format!(
         "trained {} epochs in {:.1} s ({:.2} train img/s); best epoch {}; run files in {}\n\
@@ -60,31 +62,53 @@ pub enum SplitName {
     Test,
 }
 
-/// `chicktrain eval --checkpoint X [--split val|test] [--json]`: rebuilds the data from the
-/// checkpoint's config and split, and scores the checkpoint's weights.
+/// `chicktrain eval --checkpoint X [--split val|test] [--data CONFIG] [--json]`: rebuilds
+/// the data from the checkpoint's config and split and scores the checkpoint's weights.
+/// With `--data`, the real set of another config is used instead (e.g. your photos),
+/// split by that config's `data.split` and seed, at the checkpoint's input size.
 pub fn eval_cmd(
     checkpoint: &Path,
     split: SplitName,
+    data: Option<&str>,
     device: Option<DeviceKind>,
     json_out: bool,
 ) -> Result<String> {
     let ck = Checkpoint::load(checkpoint)?;
-    let cfg = &ck.header.config;
-    let dev = device_of(device.unwrap_or(cfg.device));
-    let real = RealSet::load(&cfg.data, cfg.seed)
-        .with_context(|| format!("rebuilding the data of {}", checkpoint.display()))?;
+    let dev = device_of(device.unwrap_or(ck.header.config.device));
+    let (real, split_ids, origin) = match data {
+        None => {
+            let cfg = &ck.header.config;
+            let real = RealSet::load(&cfg.data, cfg.seed)
+                .with_context(|| format!("rebuilding the data of {}", checkpoint.display()))?;
+            (
+                real,
+                ck.header.split.clone(),
+                format!("{}", checkpoint.display()),
+            )
+        }
+        Some(name) => {
+            let mut cfg = config::load(name, &[])?;
+            cfg.data.image_size = ck.header.model.input_size as u32;
+            let real = RealSet::load(&cfg.data, cfg.seed)?;
+            let split = Split::new(&real.ids(), cfg.data.split, cfg.seed)?;
+            (real, split, format!("the data of {name}"))
+        }
+    };
     if real.cat_ids != ck.header.category_ids {
         bail!(
-            "the data's categories {:?} differ from the checkpoint's {:?}",
+            "the categories of {origin} {:?} differ from the checkpoint's {:?}",
             real.cat_ids,
             ck.header.category_ids
         );
     }
     let ids = match split {
-        SplitName::Train => &ck.header.split.train,
-        SplitName::Val => &ck.header.split.val,
-        SplitName::Test => &ck.header.split.test,
+        SplitName::Train => &split_ids.train,
+        SplitName::Val => &split_ids.val,
+        SplitName::Test => &split_ids.test,
     };
+    if ids.is_empty() {
+        bail!("the {split:?} split of {origin} is empty");
+    }
     let model = ck.model("ema", &dev)?;
     let (stats, _): (Stats, _) = evaluate_ids(&model, &real, ids, &dev)?;
     if json_out {
@@ -93,12 +117,12 @@ pub fn eval_cmd(
         );
     }
     Ok(format!(
-        "{} (epoch {}) on the {:?} split, {} images{}:\n{}\n{}",
+        "{} (epoch {}) on the {:?} split of {origin}, {} images{}:\n{}\n{}",
         checkpoint.display(),
         ck.header.epoch,
         split,
         ids.len(),
-        if ck.header.proxy {
+        if real.proxy {
             " [proxy-real renders, not real photos]"
         } else {
             ""

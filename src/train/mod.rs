@@ -8,6 +8,7 @@ pub mod checkpoint;
 pub mod commands;
 pub mod ema;
 pub mod evaluate;
+pub mod interrupt;
 pub mod optim;
 pub mod plot;
 pub mod progress;

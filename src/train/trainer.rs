@@ -372,7 +372,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let per_epoch = n_items.div_ceil(bsz);
     let weights = LossWeights::default();
     let class_names = real.class_names();
-    let header_for = |epoch: usize, best: f64, updates: u64, val: &Stats| Header {
+    let header_for = |epoch: usize, best: f64, updates: u64, val: Option<Stats>| Header {
         format: 1,
         chicktrain: env!("CARGO_PKG_VERSION").into(),
         model: mcfg.clone(),
@@ -384,7 +384,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         epoch,
         ema_updates: updates,
         best_fitness: best,
-        val: Some(val.clone()),
+        val,
     };
 
     let mut best_epoch = resume.as_ref().map_or(0, |_| {
@@ -413,6 +413,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         let mut sums = [0f64; 4];
         let mut last_lr = 0.0;
         let mut seen = 0usize;
+        let mut interrupted: Option<usize> = None;
         let step_result: Result<()> = std::thread::scope(|sc| {
             let (tx, rx) = sync_channel::<Result<Batch>>(2);
             let data = &data;
@@ -475,11 +476,41 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                     (seen * bsz) as f64 / el.max(1e-9)
                 ));
                 bar.inc(1);
+                if super::interrupt::requested() {
+                    interrupted = Some(step + 1);
+                    break;
+                }
             }
             Ok(())
         });
         bar.finish_and_clear();
         step_result?;
+        if let Some(step) = interrupted {
+            // Completed epochs stay `epoch`: --resume redoes this one from its start, with
+            // the weights, optimiser state and EMA as they are now.
+            let p = run_dir.join("last.bpk");
+            Checkpoint {
+                header: header_for(epoch, best_fitness, ema.updates, None),
+                sections: vec![
+                    (
+                        "ema".into(),
+                        module_bytes(&if cfg.train.ema {
+                            ema.model.clone()
+                        } else {
+                            model.valid()
+                        })?,
+                    ),
+                    ("model".into(), module_bytes(&model)?),
+                    ("optim".into(), optim_bytes(&optim)?),
+                ],
+            }
+            .save(&p)?;
+            bail!(
+                "interrupted (Ctrl-C) at epoch {}, step {step}; saved {} — continue with the same command plus --resume",
+                epoch + 1,
+                p.display()
+            );
+        }
         let t_train = te.elapsed().as_secs_f64();
         train_secs += t_train;
 
@@ -500,6 +531,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             "train_time": t_train,
             "images_per_s": (seen * bsz).min(n_items) as f64 / t_train.max(1e-9),
             "val": stats_json(&val),
+            "proxy": real.proxy,
         });
         records.push(rec);
         write_metrics(&run_dir, &records)?;
@@ -512,7 +544,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             best_epoch = epoch + 1;
         }
         let ema_bytes = module_bytes(&eval_model)?;
-        let header = header_for(epoch + 1, best_fitness, ema.updates, &val);
+        let header = header_for(epoch + 1, best_fitness, ema.updates, Some(val.clone()));
         if improved {
             Checkpoint {
                 header: header.clone(),
