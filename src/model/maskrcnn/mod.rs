@@ -14,6 +14,7 @@
 //! the YOLO model's types ([`ImageTargets`], [`Detection`]) so one loop serves both.
 
 pub mod anchors;
+pub mod bench;
 pub mod box_coder;
 pub mod fpn;
 pub mod losses;
@@ -460,13 +461,18 @@ mod tests {
     use super::*;
 
     #[test]
-    fn paper_r50_size_is_close_to_detectron2() {
-        // detectron2 mask_rcnn_R_50_FPN (81 classes, backbone trunk without fc): 44.4 M
-        // parameters; torchvision maskrcnn_resnet50_fpn (91 classes): 44,401,393.
-        // Ours keeps BN trainable (torchvision freezes it: same count) and nc = 80.
-        let m = MaskRcnnConfig::paper(50, 80).init(&Device::flex());
-        let p = m.summary(800).params as f64;
-        assert!((p - 44.3e6).abs() / 44.3e6 < 0.01, "params {p}");
+    fn paper_sizes_match_torchvision() {
+        // torchvision 0.29 `maskrcnn_resnet50_fpn(weights=None, weights_backbone=None,
+        // num_classes=2)`: 43,975,515 parameters; `MaskRCNN(resnet_fpn_backbone("resnet101",
+        // trainable_layers=5, norm_layer=BatchNorm2d), num_classes=2)`: 62,967,643.
+        // torchvision also regresses boxes and predicts a mask for the background class:
+        // 1024·4 + 4 and 256 + 1 more parameters than our class-specific heads for nc = 1.
+        let d = Device::flex();
+        let extra = 1024 * 4 + 4 + 256 + 1;
+        let r50 = MaskRcnnConfig::paper(50, 1).init(&d).summary(800).params;
+        assert_eq!(r50, 43_975_515 - extra);
+        let r101 = MaskRcnnConfig::paper(101, 1).init(&d).summary(800).params;
+        assert_eq!(r101, 62_967_643 - extra);
     }
 
     #[test]
