@@ -27,11 +27,22 @@ fn bench_compact() {
     for item in spec.split(',') {
         let (d, s) = item
             .split_once(':')
-            .expect("MRCNN_BENCH items are depth:size");
-        let cfg = MaskRcnnConfig::new(d.parse().unwrap(), 1).with_input_size(s.parse().unwrap());
+            .expect("MRCNN_BENCH items are [p]depth:size");
+        // A leading `p` selects the paper-sized preset (like-for-like with torchvision).
+        let (preset, d) = match d.strip_prefix('p') {
+            Some(d) => ("paper", d),
+            None => ("compact", d),
+        };
+        let (d, s): (usize, usize) = (d.parse().unwrap(), s.parse().unwrap());
+        let cfg = if preset == "paper" {
+            MaskRcnnConfig::paper(d, 1)
+        } else {
+            MaskRcnnConfig::new(d, 1)
+        }
+        .with_input_size(s);
         let dev = Device::flex();
         let summary = cfg.init(&dev).summary(cfg.input_size);
-        println!("r{d} compact: {summary}");
+        println!("r{d} {preset}: {summary}");
         println!("{}", bench_maskrcnn(&cfg, &dev, 1, train_batch, runs));
     }
 }

@@ -252,3 +252,40 @@ fn empty_images_train_and_infer() {
         .forward_infer(Tensor::zeros([1, 3, SIZE, SIZE], &Device::flex()));
     assert_eq!(dets.len(), 1);
 }
+
+#[test]
+fn degenerate_boxes_stay_finite() {
+    let ad = Device::flex().autodiff();
+    let model = tiny_config().init(&ad);
+    let n = SIZE * SIZE;
+    let full = vec![1u8; n];
+    let t = vec![
+        ImageTargets {
+            // Zero width, zero height, zero area: never positives, never NaN.
+            boxes: vec![
+                [10.0, 10.0, 10.0, 40.0],
+                [5.0, 30.0, 50.0, 30.0],
+                [20.0, 20.0, 20.0, 20.0],
+            ],
+            classes: vec![0; 3],
+            masks: vec![vec![0u8; n]; 3],
+        },
+        ImageTargets {
+            boxes: vec![[0.0, 0.0, SIZE as f32, SIZE as f32]],
+            classes: vec![0],
+            masks: vec![full],
+        },
+    ];
+    let x = Tensor::<4>::ones([2, 3, SIZE, SIZE], &ad) * 0.5;
+    let l = model.forward_train(x, &t, &mut ChaCha8Rng::seed_from_u64(1));
+    let v = l.values();
+    assert!(v.iter().all(|x| x.is_finite()), "{v:?}");
+    assert!(l.num_fg > 0, "the full-image box is a foreground RoI");
+    let grads = l.total.backward();
+    let g = GradientsParams::from_grads(grads, &model);
+    let gw: Tensor<4> = g
+        .get(model.mask_head.predictor.weight.id)
+        .expect("the mask head gets a gradient");
+    let gw = gw.into_data_as::<f32>().try_into_vec::<f32>().unwrap();
+    assert!(gw.iter().all(|x| x.is_finite()) && gw.iter().any(|x| *x != 0.0));
+}

@@ -318,3 +318,126 @@ pub fn rpn_loss<R: Rng>(
     };
     (cls, reg)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::module::Param;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    /// Head whose output is its biases only: objectness `a`, delta `(a, k)` = `10a + k`.
+    fn bias_only_head(d: &Device) -> RpnHead {
+        let mut h = RpnHead::new(4, 3, d);
+        h.objectness.weight = Param::from_tensor(h.objectness.weight.val().zeros_like());
+        h.deltas.weight = Param::from_tensor(h.deltas.weight.val().zeros_like());
+        h.objectness.bias = Some(Param::from_tensor(host(vec![0.0, 1.0, 2.0], [3], d)));
+        let db: Vec<f32> = (0..3)
+            .flat_map(|a| (0..4).map(move |k| (10 * a + k) as f32))
+            .collect();
+        h.deltas.bias = Some(Param::from_tensor(host(db, [12], d)));
+        h
+    }
+
+    #[test]
+    fn output_layout_matches_anchor_order() {
+        let d = Device::flex();
+        let h = bias_only_head(&d);
+        let feats = vec![
+            Tensor::ones([2, 4, 2, 3], &d),
+            Tensor::ones([2, 4, 1, 2], &d),
+        ];
+        let out = h.forward(&feats, &[4, 8]);
+        assert_eq!(out.logits.dims(), [2, (6 + 2) * 3]);
+        assert_eq!(out.deltas.dims(), [2, (6 + 2) * 3, 4]);
+        assert_eq!(out.levels, vec![(4, 2, 3), (8, 1, 2)]);
+        let lg = to_vec(out.logits);
+        let dl = to_vec(out.deltas);
+        // Row r belongs to cell anchor r % 3 at every location of every level.
+        for r in 0..24 {
+            assert_eq!(lg[24 + r], (r % 3) as f32);
+            for k in 0..4 {
+                assert_eq!(dl[(24 + r) * 4 + k], (10 * (r % 3) + k) as f32);
+            }
+        }
+    }
+
+    #[test]
+    fn proposals_are_top_n_per_level_and_nms_within_level() {
+        let d = Device::flex();
+        // Level 0: three anchors, two overlapping heavily; level 1: one anchor equal to the
+        // first (different level, so NMS keeps both).
+        let anchors = vec![
+            vec![
+                [0.0, 0.0, 20.0, 20.0],
+                [1.0, 1.0, 21.0, 21.0],
+                [40.0, 40.0, 60.0, 60.0],
+            ],
+            vec![[0.0, 0.0, 20.0, 20.0]],
+        ];
+        let out = RpnOutput {
+            logits: host(vec![3.0, 2.0, 1.0, 0.5], [1, 4], &d),
+            deltas: Tensor::zeros([1, 4, 4], &d),
+            levels: vec![(4, 1, 3), (8, 1, 1)],
+        };
+        let p = find_proposals(&out, &anchors, [64, 64], 10, 10, 0.7);
+        let boxes: Vec<[f32; 4]> = p[0].iter().map(|x| x.0).collect();
+        assert_eq!(
+            boxes,
+            vec![
+                [0.0, 0.0, 20.0, 20.0],
+                [40.0, 40.0, 60.0, 60.0],
+                [0.0, 0.0, 20.0, 20.0]
+            ]
+        );
+        // Pre-NMS top-1 per level keeps one proposal from each level.
+        let p = find_proposals(&out, &anchors, [64, 64], 1, 10, 0.7);
+        assert_eq!(p[0].len(), 2);
+        // Post-NMS top-N caps the total, best first; boxes are clipped to the image.
+        let p = find_proposals(&out, &anchors, [50, 50], 10, 2, 0.7);
+        assert_eq!(p[0].iter().map(|x| x.1).collect::<Vec<_>>(), vec![3.0, 1.0]);
+        assert_eq!(p[0][1].0, [40.0, 40.0, 50.0, 50.0]);
+    }
+
+    #[test]
+    fn loss_hand_values() {
+        let d = Device::flex();
+        // Four anchors, GT equal to anchor 0: one positive, three negatives sampled (batch 8).
+        let anchors = vec![vec![
+            [0.0, 0.0, 10.0, 10.0],
+            [30.0, 30.0, 40.0, 40.0],
+            [50.0, 0.0, 60.0, 10.0],
+            [0.0, 50.0, 10.0, 60.0],
+        ]];
+        let out = RpnOutput {
+            logits: Tensor::zeros([1, 4], &d),
+            deltas: host(vec![0.5; 16], [1, 4, 4], &d),
+            levels: vec![(4, 1, 4)],
+        };
+        let t = vec![ImageTargets {
+            boxes: vec![[0.0, 0.0, 10.0, 10.0]],
+            classes: vec![0],
+            masks: vec![vec![]],
+        }];
+        let cfg = RpnConfig {
+            batch_per_image: 8,
+            ..RpnConfig::compact()
+        };
+        let (cls, reg) = rpn_loss(&out, &anchors, &t, &cfg, &mut ChaCha8Rng::seed_from_u64(0));
+        // BCE at logit 0 is ln 2 for each of the 4 sampled anchors, / (1 image × 8).
+        assert!((to_vec(cls)[0] - 4.0 * 2f32.ln() / 8.0).abs() < 1e-6);
+        // Target deltas are 0: L1 = 4 × 0.5 on the positive, / 8.
+        assert!((to_vec(reg)[0] - 2.0 / 8.0).abs() < 1e-6);
+        // No GT: every sampled anchor is negative, no box loss.
+        let empty = vec![ImageTargets::default()];
+        let (cls, reg) = rpn_loss(
+            &out,
+            &anchors,
+            &empty,
+            &cfg,
+            &mut ChaCha8Rng::seed_from_u64(0),
+        );
+        assert!((to_vec(cls)[0] - 4.0 * 2f32.ln() / 8.0).abs() < 1e-6);
+        assert_eq!(to_vec(reg)[0], 0.0);
+    }
+}
