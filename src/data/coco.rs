@@ -49,6 +49,18 @@ impl Segmentation {
         })
     }
 
+    /// The checks of [`Segmentation::to_rle`] without rasterising polygons, so loading a
+    /// file validates it at the cost of parsing it.
+    pub fn check(&self, height: u32, width: u32) -> Result<()> {
+        match self {
+            Segmentation::Polygons(polys) => {
+                check_polygons(polys)?;
+                check_polygon_extent(polys, height, width)
+            }
+            _ => self.to_rle(height, width).map(|_| ()),
+        }
+    }
+
     /// Compressed RLE of a mask, the form chicktrain writes.
     pub fn from_rle(rle: &Rle) -> Segmentation {
         Segmentation::Rle {
@@ -311,7 +323,7 @@ impl CocoDataset {
                 bail!("{}: area {} is negative or not finite", ctx(), a.area);
             }
             a.segmentation
-                .to_rle(im.height, im.width)
+                .check(im.height, im.width)
                 .with_context(ctx)?;
         }
         Ok(())
