@@ -138,16 +138,20 @@ mod tests {
         }
     }
 
+    fn tiny_model(dev: &Device) -> crate::model::yolo::YoloSeg {
+        YoloSegConfig::new(Scale::N, 1)
+            .with_input_size(32)
+            .with_width_mult(0.25)
+            .with_num_masks(4)
+            .init(dev)
+    }
+
     /// With zero gradients, SGD weight decay alone moves the weights: conv weights must
     /// shrink, BatchNorm γ/β and biases must not.
     #[test]
     fn no_weight_decay_on_biases_and_norms() {
         let dev = Device::flex().autodiff();
-        let model = YoloSegConfig::new(Scale::N, 1)
-            .with_input_size(32)
-            .with_width_mult(0.25)
-            .with_num_masks(4)
-            .init(&dev);
+        let model = tiny_model(&dev);
         let mut t = TrainConfig::default();
         t.weight_decay = 0.5;
         t.momentum = 0.0;
@@ -196,11 +200,7 @@ mod tests {
     #[test]
     fn global_norm_clipping_scales_all_grads() {
         let dev = Device::flex().autodiff();
-        let model = YoloSegConfig::new(Scale::N, 1)
-            .with_input_size(32)
-            .with_width_mult(0.25)
-            .with_num_masks(4)
-            .init(&dev);
+        let model = tiny_model(&dev);
         let out = model.forward(burn::tensor::Tensor::ones([1, 3, 32, 32], &dev));
         let loss = out.cls_logits.sum().mul_scalar(100.0) + out.proto.powi_scalar(2).sum();
         let mut grads = GradientsParams::from_grads(loss.backward(), &model);
