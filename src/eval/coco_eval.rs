@@ -125,14 +125,11 @@ struct DtAnn<'a> {
     id: u64,
     area: f64,
     bbox: [f64; 4],
+    /// The mask, when `loadRes` already decoded it for the area (results without boxes).
+    rle: Option<Rle>,
 }
 
-fn load_res<'a>(gt: &CocoDataset, dets: &'a [Detection]) -> Result<Vec<DtAnn<'a>>> {
-    let sizes: HashMap<u64, (u32, u32)> = gt
-        .images
-        .iter()
-        .map(|im| (im.id, (im.height, im.width)))
-        .collect();
+fn load_res<'a>(sizes: &HashMap<u64, (u32, u32)>, dets: &'a [Detection]) -> Result<Vec<DtAnn<'a>>> {
     let box_branch = dets.first().is_some_and(|d| d.bbox.is_some());
     let mut out = Vec::with_capacity(dets.len());
     for (i, d) in dets.iter().enumerate() {
@@ -142,11 +139,11 @@ fn load_res<'a>(gt: &CocoDataset, dets: &'a [Detection]) -> Result<Vec<DtAnn<'a>
                 d.image_id
             );
         };
-        let (area, bbox) = if box_branch {
+        let (area, bbox, rle) = if box_branch {
             let bb = d.bbox.with_context(|| {
                 format!("detection {i} has no bbox, but the first detection has one")
             })?;
-            (bb[2] * bb[3], bb)
+            (bb[2] * bb[3], bb, None)
         } else {
             let seg = d
                 .segmentation
@@ -155,13 +152,18 @@ fn load_res<'a>(gt: &CocoDataset, dets: &'a [Detection]) -> Result<Vec<DtAnn<'a>
             let rle = seg
                 .to_rle(h, w)
                 .with_context(|| format!("detection {i} (image {})", d.image_id))?;
-            (rle.area() as f64, d.bbox.unwrap_or_else(|| rle.bbox()))
+            (
+                rle.area() as f64,
+                d.bbox.unwrap_or_else(|| rle.bbox()),
+                Some(rle),
+            )
         };
         out.push(DtAnn {
             det: d,
             id: i as u64 + 1,
             area,
             bbox,
+            rle,
         });
     }
     Ok(out)
@@ -220,28 +222,31 @@ pub fn evaluate(gt: &CocoDataset, dets: &[Detection], iou_type: IouType) -> Resu
         });
     }
     let mut dts: Vec<Vec<Inst>> = (0..ni * nk).map(|_| Vec::new()).collect();
-    for d in load_res(gt, dets)? {
+    for d in load_res(&sizes, dets)? {
         let Some(&k) = cat_index.get(&d.det.category_id) else {
             continue; // pycocotools only evaluates the GT's categories
         };
         let i = img_index[&d.det.image_id];
-        let rle =
-            if segm {
+        let rle = match (segm, d.rle) {
+            (false, _) => None,
+            (true, Some(rle)) => Some(rle),
+            (true, None) => {
                 let (h, w) = sizes[&d.det.image_id];
-                let seg = match &d.det.segmentation {
-                    Some(s) => s.clone(),
+                let rle = match &d.det.segmentation {
+                    Some(seg) => seg.to_rle(h, w),
                     None => {
+                        // loadRes gives box-only results the box as a polygon
                         let b = d.bbox;
                         let (x1, x2, y1, y2) = (b[0], b[0] + b[2], b[1], b[1] + b[3]);
                         Segmentation::Polygons(vec![vec![x1, y1, x1, y2, x2, y2, x2, y1]])
+                            .to_rle(h, w)
                     }
                 };
-                Some(seg.to_rle(h, w).with_context(|| {
+                Some(rle.with_context(|| {
                     format!("detection {} (image {})", d.id - 1, d.det.image_id)
                 })?)
-            } else {
-                None
-            };
+            }
+        };
         let rle_box = rle.as_ref().map_or([0.0; 4], |r| r.bbox());
         dts[i * nk + k].push(Inst {
             id: d.id,
