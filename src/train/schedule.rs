@@ -1,4 +1,5 @@
-//! Learning-rate schedule: linear warmup over `warmup_epochs` (per iteration), then the
+//! Learning-rate schedule: linear warmup over `warmup_epochs` (per iteration) or
+//! `warmup_iters` (the Mask R-CNN paper's 500 iterations), then the
 //! per-epoch factor of ultralytics' schedulers — linear `(1 − e/E)(1 − lrf) + lrf`,
 //! cosine `1 + (lrf − 1)(1 − cos(πe/E))/2` — or the paper's multi-step (×0.1 at each
 //! milestone epoch).
@@ -27,7 +28,11 @@ pub fn epoch_factor(t: &TrainConfig, epoch: usize) -> f64 {
 /// Learning rate of iteration `iter` (0-based) of `epoch`, with `per_epoch` iterations.
 pub fn lr_at(t: &TrainConfig, epoch: usize, iter: usize, per_epoch: usize) -> f64 {
     let base = t.lr * epoch_factor(t, epoch);
-    let warm = (t.warmup_epochs * per_epoch as f64).round();
+    let warm = if t.warmup_iters > 0 {
+        t.warmup_iters as f64
+    } else {
+        (t.warmup_epochs * per_epoch as f64).round()
+    };
     let global = (epoch * per_epoch + iter) as f64;
     if warm > 0.0 && global < warm {
         base * (global + 1.0) / (warm + 1.0)
@@ -96,5 +101,16 @@ mod tests {
         let mut no = t.clone();
         no.warmup_epochs = 0.0;
         assert_eq!(lr_at(&no, 0, 0, per), 0.01);
+    }
+
+    #[test]
+    fn warmup_iters_replaces_warmup_epochs() {
+        let mut t = cfg(ScheduleKind::Multistep);
+        t.warmup_iters = 25; // 2.5 epochs of 10 iterations, whatever warmup_epochs says
+        let per = 10;
+        assert!((lr_at(&t, 0, 0, per) - 0.01 / 26.0).abs() < 1e-12);
+        assert!((lr_at(&t, 2, 4, per) - 0.01 * 25.0 / 26.0).abs() < 1e-12);
+        assert_eq!(lr_at(&t, 2, 5, per), 0.01);
+        assert_eq!(lr_at(&t, 3, 0, per), 0.01);
     }
 }
