@@ -36,6 +36,46 @@ pub const SHIPPED: &[(&str, &str)] = &[
         "yolo_syn1000.toml",
         include_str!("../configs/yolo_syn1000.toml"),
     ),
+    (
+        "maskrcnn_r50_real_baseline.toml",
+        include_str!("../configs/maskrcnn_r50_real_baseline.toml"),
+    ),
+    (
+        "maskrcnn_r50_syn250.toml",
+        include_str!("../configs/maskrcnn_r50_syn250.toml"),
+    ),
+    (
+        "maskrcnn_r50_syn500.toml",
+        include_str!("../configs/maskrcnn_r50_syn500.toml"),
+    ),
+    (
+        "maskrcnn_r50_syn750.toml",
+        include_str!("../configs/maskrcnn_r50_syn750.toml"),
+    ),
+    (
+        "maskrcnn_r50_syn1000.toml",
+        include_str!("../configs/maskrcnn_r50_syn1000.toml"),
+    ),
+    (
+        "maskrcnn_r101_real_baseline.toml",
+        include_str!("../configs/maskrcnn_r101_real_baseline.toml"),
+    ),
+    (
+        "maskrcnn_r101_syn250.toml",
+        include_str!("../configs/maskrcnn_r101_syn250.toml"),
+    ),
+    (
+        "maskrcnn_r101_syn500.toml",
+        include_str!("../configs/maskrcnn_r101_syn500.toml"),
+    ),
+    (
+        "maskrcnn_r101_syn750.toml",
+        include_str!("../configs/maskrcnn_r101_syn750.toml"),
+    ),
+    (
+        "maskrcnn_r101_syn1000.toml",
+        include_str!("../configs/maskrcnn_r101_syn1000.toml"),
+    ),
 ];
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -746,6 +786,60 @@ mod tests {
             assert!(err.contains(needle), "{err:?} should mention {needle:?}");
             assert!(err.contains("test.toml"), "{err:?} should name the file");
         }
+    }
+
+    #[test]
+    fn model_keys_belong_to_their_kind() {
+        let yolo = SHIPPED[0].1;
+        let (mrcnn, _) = locate("maskrcnn_r101_syn1000").unwrap();
+        let cases: Vec<(&str, Vec<String>, &str)> = vec![
+            (
+                yolo,
+                vec!["model.depth=50".into()],
+                "model.depth is a maskrcnn key, but model.kind = \"yolo\"",
+            ),
+            (
+                &mrcnn,
+                vec!["model.scale=\"n\"".into()],
+                "model.scale is a yolo key, but model.kind = \"maskrcnn\"",
+            ),
+            (
+                &mrcnn,
+                vec!["model.depth=42".into()],
+                "model.depth = 42 must be 18, 34, 50 or 101",
+            ),
+            (
+                &mrcnn,
+                vec!["model.anchor_sizes=[8.0, 16.0]".into()],
+                "model.anchor_sizes",
+            ),
+            (
+                &mrcnn,
+                vec!["model.roi_batch=0".into()],
+                "model.roi_batch = 0",
+            ),
+            (
+                &mrcnn,
+                vec!["model.preset=\"huge\"".into()],
+                "unknown variant",
+            ),
+        ];
+        for (text, ov, needle) in cases {
+            let err = format!("{:#}", parse(text, "test.toml", &ov).unwrap_err());
+            assert!(err.contains(needle), "{err:?} should mention {needle:?}");
+        }
+        // The resolved config (what a run folder holds) parses back to the same model.
+        let cfg = parse(&mrcnn, "m", &["model.depth=50".into()]).unwrap();
+        assert_eq!(cfg.model.depth, Some(50));
+        assert_eq!(cfg.model.preset, Some(MaskRcnnPreset::Compact));
+        assert!(cfg.model.scale.is_none());
+        let back = parse(&toml::to_string(&cfg).unwrap(), "resolved", &[]).unwrap();
+        assert_eq!(back.model.depth, Some(50));
+        assert_eq!(back.train.warmup_iters, 500);
+        let y = parse(yolo, "q", &[]).unwrap();
+        assert_eq!(y.model.scale.as_deref(), Some("n"));
+        assert_eq!(y.model.prototypes, Some(32));
+        assert!(y.model.depth.is_none());
     }
 
     #[test]

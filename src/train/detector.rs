@@ -144,11 +144,15 @@ impl DetectorConfig {
 
     /// Why a checkpoint's model cannot continue or replace this one, if it cannot.
     pub fn mismatch(&self, other: &DetectorConfig) -> Option<String> {
+        let name = |k: ModelKind| match k {
+            ModelKind::Yolo => "model.kind = \"yolo\"",
+            ModelKind::Maskrcnn => "model.kind = \"maskrcnn\"",
+        };
         if self.kind() != other.kind() {
             return Some(format!(
-                "it holds a {:?} model, not {:?}",
-                other.kind(),
-                self.kind()
+                "it holds a {} model, the config asks for {}",
+                name(other.kind()),
+                name(self.kind())
             ));
         }
         if self.num_classes() != other.num_classes() {

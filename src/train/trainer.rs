@@ -264,6 +264,13 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             );
         }
         let ck = Checkpoint::load(&p)?;
+        if ck.header.model.kind() != cfg.model.kind {
+            // Checked before anything is written to the run folder.
+            let probe = DetectorConfig::from_config(&cfg, ck.header.model.num_classes())?;
+            if let Some(why) = probe.mismatch(&ck.header.model) {
+                bail!("--resume: cannot continue from {}: {why}", p.display());
+            }
+        }
         if ck.header.epoch >= cfg.train.epochs {
             bail!(
                 "--resume: {} already completed {} of {} epochs (raise train.epochs with --set to train longer)",
