@@ -225,3 +225,69 @@ impl Detector {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config;
+
+    fn load(name: &str, ov: &[&str]) -> Config {
+        let ov: Vec<String> = ov.iter().map(|s| s.to_string()).collect();
+        config::load(name, &ov).unwrap()
+    }
+
+    #[test]
+    fn config_keys_reach_the_model_config() {
+        let c = DetectorConfig::from_config(&load("maskrcnn_r101_syn1000", &[]), 1).unwrap();
+        let DetectorConfig::Maskrcnn(m) = &c else {
+            panic!("{c:?}")
+        };
+        assert_eq!(
+            m,
+            &MaskRcnnConfig::new(101, 1).with_input_size(640),
+            "compact preset, 640 px"
+        );
+        let c = DetectorConfig::from_config(
+            &load(
+                "maskrcnn_r50_syn750",
+                &[
+                    "model.preset=\"paper\"",
+                    "model.roi_batch=64",
+                    "model.anchor_sizes=[16.0, 32.0, 64.0, 128.0, 256.0]",
+                    "model.mask_class_agnostic=true",
+                    "model.rpn_post_nms_topk_test=77",
+                ],
+            ),
+            2,
+        )
+        .unwrap();
+        let DetectorConfig::Maskrcnn(m) = &c else {
+            panic!("{c:?}")
+        };
+        assert_eq!((m.depth, m.num_classes, m.fpn_channels), (50, 2, 256));
+        assert_eq!(m.roi.batch_per_image, 64);
+        assert_eq!(m.roi.fc_dim, 1024, "paper preset kept where not overridden");
+        assert_eq!(m.anchors.sizes, [16.0, 32.0, 64.0, 128.0, 256.0]);
+        assert!(m.mask.class_agnostic);
+        assert_eq!(m.rpn.post_nms_topk_test, 77);
+        let y = DetectorConfig::from_config(&load("quickstart", &[]), 1).unwrap();
+        assert_eq!(y.kind(), ModelKind::Yolo);
+        assert_eq!(y.input_size(), 256);
+    }
+
+    #[test]
+    fn mismatches_name_the_kind_and_the_class_count() {
+        let m = DetectorConfig::from_config(&load("maskrcnn_r50_syn250", &[]), 1).unwrap();
+        let y = DetectorConfig::from_config(&load("quickstart", &[]), 1).unwrap();
+        let m3 = DetectorConfig::from_config(&load("maskrcnn_r50_syn250", &[]), 3).unwrap();
+        assert_eq!(m.mismatch(&m.clone()), None);
+        let e = m.mismatch(&y).unwrap();
+        assert!(
+            e.contains("holds a model.kind = \"yolo\" model")
+                && e.contains("asks for model.kind = \"maskrcnn\""),
+            "{e}"
+        );
+        let e = m.mismatch(&m3).unwrap();
+        assert!(e.contains("it has 3 classes, the data has 1"), "{e}");
+    }
+}
