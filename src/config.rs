@@ -36,6 +36,46 @@ pub const SHIPPED: &[(&str, &str)] = &[
         "yolo_syn1000.toml",
         include_str!("../configs/yolo_syn1000.toml"),
     ),
+    (
+        "maskrcnn_r50_real_baseline.toml",
+        include_str!("../configs/maskrcnn_r50_real_baseline.toml"),
+    ),
+    (
+        "maskrcnn_r50_syn250.toml",
+        include_str!("../configs/maskrcnn_r50_syn250.toml"),
+    ),
+    (
+        "maskrcnn_r50_syn500.toml",
+        include_str!("../configs/maskrcnn_r50_syn500.toml"),
+    ),
+    (
+        "maskrcnn_r50_syn750.toml",
+        include_str!("../configs/maskrcnn_r50_syn750.toml"),
+    ),
+    (
+        "maskrcnn_r50_syn1000.toml",
+        include_str!("../configs/maskrcnn_r50_syn1000.toml"),
+    ),
+    (
+        "maskrcnn_r101_real_baseline.toml",
+        include_str!("../configs/maskrcnn_r101_real_baseline.toml"),
+    ),
+    (
+        "maskrcnn_r101_syn250.toml",
+        include_str!("../configs/maskrcnn_r101_syn250.toml"),
+    ),
+    (
+        "maskrcnn_r101_syn500.toml",
+        include_str!("../configs/maskrcnn_r101_syn500.toml"),
+    ),
+    (
+        "maskrcnn_r101_syn750.toml",
+        include_str!("../configs/maskrcnn_r101_syn750.toml"),
+    ),
+    (
+        "maskrcnn_r101_syn1000.toml",
+        include_str!("../configs/maskrcnn_r101_syn1000.toml"),
+    ),
 ];
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -149,33 +189,78 @@ pub enum ModelKind {
     Maskrcnn,
 }
 
+/// Size preset of a Mask R-CNN: `compact` (CPU- and scene-sized) or `paper` (detectron2's
+/// R-FPN sizes). Single `model.*` keys override either.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MaskRcnnPreset {
+    Compact,
+    Paper,
+}
+
+/// `[model]`. One flat table for both kinds so `--set model.depth=101` works; keys of the
+/// other kind are rejected by [`Config::validate`] (they stay `None` unless given), and
+/// [`Config::resolve`] fills in the defaults of the chosen kind so the resolved
+/// `config.toml` lists every value the model was built with.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelConfig {
     #[serde(default = "default_model_kind")]
     pub kind: ModelKind,
-    /// YOLO scale `n` or `s`.
-    #[serde(default = "default_scale")]
-    pub scale: String,
-    /// Pyramid levels that carry heads: [3, 4, 5] (default) or [4, 5].
-    #[serde(default = "default_levels")]
-    pub levels: Vec<u32>,
-    #[serde(default = "default_true")]
-    pub c2psa: bool,
+    /// Width multiplier (YOLO: on top of the scale; Mask R-CNN: ResNet widths).
     #[serde(default = "default_one")]
     pub width_mult: f64,
-    #[serde(default = "default_protos")]
-    pub prototypes: usize,
+    // --- YOLO only ---
+    /// YOLO scale `n` or `s`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<String>,
+    /// Pyramid levels that carry heads: [3, 4, 5] (default) or [4, 5].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub levels: Option<Vec<u32>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub c2psa: Option<bool>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prototypes: Option<usize>,
+    // --- Mask R-CNN only ---
+    /// ResNet depth: 18, 34, 50 or 101.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preset: Option<MaskRcnnPreset>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fpn_channels: Option<usize>,
+    /// Anchor sizes in input pixels, one per level P2…P6.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub anchor_sizes: Option<Vec<f32>>,
+    /// Anchors sampled per image for the RPN loss.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_batch: Option<usize>,
+    /// RPN proposals per level before NMS and per image after NMS, in training.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_pre_nms_topk_train: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_post_nms_topk_train: Option<usize>,
+    /// The same at inference.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_pre_nms_topk_test: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_post_nms_topk_test: Option<usize>,
+    /// RoIs sampled per image for the box and mask losses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roi_batch: Option<usize>,
+    /// Width of the box head's FC layers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub box_fc_dim: Option<usize>,
+    /// Width of the mask head's convolutions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask_conv_dim: Option<usize>,
+    /// One mask per RoI instead of one per class.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask_class_agnostic: Option<bool>,
 }
 
 fn default_model_kind() -> ModelKind {
     ModelKind::Yolo
-}
-fn default_scale() -> String {
-    "n".into()
-}
-fn default_levels() -> Vec<u32> {
-    vec![3, 4, 5]
 }
 fn default_true() -> bool {
     true
@@ -183,13 +268,76 @@ fn default_true() -> bool {
 fn default_one() -> f64 {
     1.0
 }
-fn default_protos() -> usize {
-    32
-}
 
 impl Default for ModelConfig {
     fn default() -> Self {
         toml::from_str("").expect("model defaults")
+    }
+}
+
+impl ModelConfig {
+    /// YOLO scale (default `n`).
+    pub fn scale(&self) -> &str {
+        self.scale.as_deref().unwrap_or("n")
+    }
+    /// YOLO head levels (default [3, 4, 5]).
+    pub fn levels(&self) -> Vec<u32> {
+        self.levels.clone().unwrap_or_else(|| vec![3, 4, 5])
+    }
+    /// YOLO C2PSA block (default on).
+    pub fn c2psa(&self) -> bool {
+        self.c2psa.unwrap_or(true)
+    }
+    /// YOLO mask prototypes (default 32).
+    pub fn prototypes(&self) -> usize {
+        self.prototypes.unwrap_or(32)
+    }
+    /// Mask R-CNN ResNet depth (default 50).
+    pub fn depth(&self) -> usize {
+        self.depth.unwrap_or(50)
+    }
+    /// Mask R-CNN size preset (default compact).
+    pub fn preset(&self) -> MaskRcnnPreset {
+        self.preset.unwrap_or(MaskRcnnPreset::Compact)
+    }
+
+    /// `(key, given)` of the YOLO-only keys and of the Mask R-CNN-only keys.
+    fn kind_keys(&self) -> [Vec<(&'static str, bool)>; 2] {
+        [
+            vec![
+                ("scale", self.scale.is_some()),
+                ("levels", self.levels.is_some()),
+                ("c2psa", self.c2psa.is_some()),
+                ("prototypes", self.prototypes.is_some()),
+            ],
+            vec![
+                ("depth", self.depth.is_some()),
+                ("preset", self.preset.is_some()),
+                ("fpn_channels", self.fpn_channels.is_some()),
+                ("anchor_sizes", self.anchor_sizes.is_some()),
+                ("rpn_batch", self.rpn_batch.is_some()),
+                (
+                    "rpn_pre_nms_topk_train",
+                    self.rpn_pre_nms_topk_train.is_some(),
+                ),
+                (
+                    "rpn_post_nms_topk_train",
+                    self.rpn_post_nms_topk_train.is_some(),
+                ),
+                (
+                    "rpn_pre_nms_topk_test",
+                    self.rpn_pre_nms_topk_test.is_some(),
+                ),
+                (
+                    "rpn_post_nms_topk_test",
+                    self.rpn_post_nms_topk_test.is_some(),
+                ),
+                ("roi_batch", self.roi_batch.is_some()),
+                ("box_fc_dim", self.box_fc_dim.is_some()),
+                ("mask_conv_dim", self.mask_conv_dim.is_some()),
+                ("mask_class_agnostic", self.mask_class_agnostic.is_some()),
+            ],
+        ]
     }
 }
 
@@ -234,6 +382,10 @@ pub struct TrainConfig {
     /// `warmup_bias_lr`, 0.1 in its SGD recipe; 0 = biases warm up like weights).
     #[serde(default)]
     pub warmup_bias_lr: f64,
+    /// Warmup length in iterations (the Mask R-CNN paper: 500); when > 0 it replaces
+    /// `warmup_epochs`.
+    #[serde(default)]
+    pub warmup_iters: usize,
     #[serde(default = "default_schedule")]
     pub schedule: ScheduleKind,
     /// Multistep: epochs where the learning rate drops ×0.1 (paper: 30, 60, 100).
@@ -351,8 +503,10 @@ pub fn parse(text: &str, origin: &str, overrides: &[String]) -> Result<Config> {
             format!("in config {origin} with overrides {}", overrides.join(" "))
         }
     })?;
+    let mut cfg = cfg;
     cfg.validate()
         .with_context(|| format!("in config {origin}"))?;
+    cfg.resolve();
     Ok(cfg)
 }
 
@@ -477,19 +631,91 @@ impl Config {
         if t.milestones.windows(2).any(|w| w[0] >= w[1]) {
             bail!("train.milestones = {:?} must be increasing", t.milestones);
         }
-        if !matches!(m.scale.as_str(), "n" | "s") {
-            bail!("model.scale = {:?} must be \"n\" or \"s\"", m.scale);
-        }
-        if m.levels != [3, 4, 5] && m.levels != [4, 5] {
-            bail!("model.levels = {:?} must be [3, 4, 5] or [4, 5]", m.levels);
-        }
         if !(m.width_mult.is_finite() && m.width_mult > 0.0 && m.width_mult <= 4.0) {
             bail!("model.width_mult = {} must be in (0, 4]", m.width_mult);
         }
-        if !(1..=256).contains(&m.prototypes) {
-            bail!("model.prototypes = {} must be in 1..=256", m.prototypes);
+        let [yolo_keys, mrcnn_keys] = m.kind_keys();
+        let (kind, foreign, other) = match m.kind {
+            ModelKind::Yolo => ("yolo", mrcnn_keys, "maskrcnn"),
+            ModelKind::Maskrcnn => ("maskrcnn", yolo_keys, "yolo"),
+        };
+        if let Some((k, _)) = foreign.iter().find(|(_, given)| *given) {
+            bail!(
+                "model.{k} is a {other} key, but model.kind = \"{kind}\" (remove it, or set model.kind = \"{other}\")"
+            );
+        }
+        match m.kind {
+            ModelKind::Yolo => {
+                if !matches!(m.scale(), "n" | "s") {
+                    bail!("model.scale = {:?} must be \"n\" or \"s\"", m.scale());
+                }
+                let levels = m.levels();
+                if levels != [3, 4, 5] && levels != [4, 5] {
+                    bail!("model.levels = {levels:?} must be [3, 4, 5] or [4, 5]");
+                }
+                if !(1..=256).contains(&m.prototypes()) {
+                    bail!("model.prototypes = {} must be in 1..=256", m.prototypes());
+                }
+            }
+            ModelKind::Maskrcnn => {
+                if ![18, 34, 50, 101].contains(&m.depth()) {
+                    bail!("model.depth = {} must be 18, 34, 50 or 101", m.depth());
+                }
+                if d.crop < 64 {
+                    bail!(
+                        "data.crop = {} must be at least 64 for model.kind = \"maskrcnn\"",
+                        d.crop
+                    );
+                }
+                if let Some(a) = &m.anchor_sizes {
+                    if a.len() != 5 || a.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+                        bail!(
+                            "model.anchor_sizes = {a:?} must be 5 positive sizes in pixels (P2…P6)"
+                        );
+                    }
+                }
+                for (k, v, max) in [
+                    ("fpn_channels", m.fpn_channels, 1024),
+                    ("rpn_batch", m.rpn_batch, 4096),
+                    ("rpn_pre_nms_topk_train", m.rpn_pre_nms_topk_train, 100_000),
+                    (
+                        "rpn_post_nms_topk_train",
+                        m.rpn_post_nms_topk_train,
+                        100_000,
+                    ),
+                    ("rpn_pre_nms_topk_test", m.rpn_pre_nms_topk_test, 100_000),
+                    ("rpn_post_nms_topk_test", m.rpn_post_nms_topk_test, 100_000),
+                    ("roi_batch", m.roi_batch, 4096),
+                    ("box_fc_dim", m.box_fc_dim, 8192),
+                    ("mask_conv_dim", m.mask_conv_dim, 1024),
+                ] {
+                    if let Some(v) = v {
+                        if !(1..=max).contains(&v) {
+                            bail!("model.{k} = {v} must be in 1..={max}");
+                        }
+                    }
+                }
+            }
         }
         Ok(())
+    }
+
+    /// Fills in the defaults of the chosen model kind (call after [`Config::validate`]), so
+    /// the resolved config written to a run folder names every model value.
+    pub fn resolve(&mut self) {
+        let m = &mut self.model;
+        match m.kind {
+            ModelKind::Yolo => {
+                m.scale = Some(m.scale().to_string());
+                m.levels = Some(m.levels());
+                m.c2psa = Some(m.c2psa());
+                m.prototypes = Some(m.prototypes());
+            }
+            ModelKind::Maskrcnn => {
+                m.depth = Some(m.depth());
+                m.preset = Some(m.preset());
+            }
+        }
     }
 }
 
@@ -570,6 +796,60 @@ mod tests {
             assert!(err.contains(needle), "{err:?} should mention {needle:?}");
             assert!(err.contains("test.toml"), "{err:?} should name the file");
         }
+    }
+
+    #[test]
+    fn model_keys_belong_to_their_kind() {
+        let yolo = SHIPPED[0].1;
+        let (mrcnn, _) = locate("maskrcnn_r101_syn1000").unwrap();
+        let cases: Vec<(&str, Vec<String>, &str)> = vec![
+            (
+                yolo,
+                vec!["model.depth=50".into()],
+                "model.depth is a maskrcnn key, but model.kind = \"yolo\"",
+            ),
+            (
+                &mrcnn,
+                vec!["model.scale=\"n\"".into()],
+                "model.scale is a yolo key, but model.kind = \"maskrcnn\"",
+            ),
+            (
+                &mrcnn,
+                vec!["model.depth=42".into()],
+                "model.depth = 42 must be 18, 34, 50 or 101",
+            ),
+            (
+                &mrcnn,
+                vec!["model.anchor_sizes=[8.0, 16.0]".into()],
+                "model.anchor_sizes",
+            ),
+            (
+                &mrcnn,
+                vec!["model.roi_batch=0".into()],
+                "model.roi_batch = 0",
+            ),
+            (
+                &mrcnn,
+                vec!["model.preset=\"huge\"".into()],
+                "unknown variant",
+            ),
+        ];
+        for (text, ov, needle) in cases {
+            let err = format!("{:#}", parse(text, "test.toml", &ov).unwrap_err());
+            assert!(err.contains(needle), "{err:?} should mention {needle:?}");
+        }
+        // The resolved config (what a run folder holds) parses back to the same model.
+        let cfg = parse(&mrcnn, "m", &["model.depth=50".into()]).unwrap();
+        assert_eq!(cfg.model.depth, Some(50));
+        assert_eq!(cfg.model.preset, Some(MaskRcnnPreset::Compact));
+        assert!(cfg.model.scale.is_none());
+        let back = parse(&toml::to_string(&cfg).unwrap(), "resolved", &[]).unwrap();
+        assert_eq!(back.model.depth, Some(50));
+        assert_eq!(back.train.warmup_iters, 500);
+        let y = parse(yolo, "q", &[]).unwrap();
+        assert_eq!(y.model.scale.as_deref(), Some("n"));
+        assert_eq!(y.model.prototypes, Some(32));
+        assert!(y.model.depth.is_none());
     }
 
     #[test]

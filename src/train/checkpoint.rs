@@ -20,9 +20,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::Config;
 use crate::data::split::Split;
-use crate::model::yolo::{YoloSeg, YoloSegConfig};
+
+use super::detector::{Detector, DetectorConfig};
 
 const MAGIC: &[u8] = b"CHICKTRAIN-CKPT1\n";
+/// Header format: 2 added the model kind (`model.kind`).
+pub const FORMAT: u32 = 2;
 
 /// Validation (or test) COCO stats of a model, pycocotools order.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -36,7 +39,8 @@ pub struct Stats {
 pub struct Header {
     pub format: u32,
     pub chicktrain: String,
-    pub model: YoloSegConfig,
+    /// The model kind (`model.kind`) and its full config.
+    pub model: DetectorConfig,
     /// COCO category ids in class-index order, and their names.
     pub category_ids: Vec<u64>,
     pub class_names: Vec<String>,
@@ -130,7 +134,12 @@ impl Checkpoint {
         let mut r = Reader { b, at: MAGIC.len() };
         let n = r.len().ok_or_else(|| bad("truncated"))?;
         let header: Header = serde_json::from_slice(r.take(n).ok_or_else(|| bad("truncated"))?)
-            .with_context(|| format!("{}: unreadable checkpoint header", origin.display()))?;
+            .with_context(|| {
+                format!(
+                    "{}: unreadable checkpoint header (written by an older chicktrain? header format {FORMAT} is needed)",
+                    origin.display()
+                )
+            })?;
         let count = r.len().ok_or_else(|| bad("truncated"))?;
         if count > 64 {
             return Err(bad("too many sections"));
@@ -163,7 +172,7 @@ impl Checkpoint {
     }
 
     /// Builds the model of the header on `device` and loads section `name` into it.
-    pub fn model(&self, name: &str, device: &Device) -> Result<YoloSeg> {
+    pub fn model(&self, name: &str, device: &Device) -> Result<Detector> {
         let data = self
             .section(name)
             .with_context(|| format!("checkpoint has no {name:?} weights"))?;
@@ -206,7 +215,7 @@ impl<'a> Reader<'a> {
 mod tests {
     use super::*;
     use crate::data::split::Split;
-    use crate::model::yolo::Scale;
+    use crate::model::yolo::{Scale, YoloSegConfig};
     use burn::tensor::{Tensor, TensorData};
 
     #[test]
@@ -217,10 +226,11 @@ mod tests {
             .with_width_mult(0.25)
             .with_num_masks(4);
         let model = mcfg.init(&dev);
+        let mcfg = DetectorConfig::Yolo(mcfg);
         let cfg = crate::config::parse(crate::config::SHIPPED[0].1, "q", &[]).unwrap();
         let ck = Checkpoint {
             header: Header {
-                format: 1,
+                format: FORMAT,
                 chicktrain: "test".into(),
                 model: mcfg.clone(),
                 category_ids: vec![1],
@@ -233,7 +243,10 @@ mod tests {
                 best_fitness: 0.5,
                 val: None,
             },
-            sections: vec![("ema".into(), module_bytes(&model).unwrap())],
+            sections: vec![(
+                "ema".into(),
+                module_bytes(&Detector::Yolo(model.clone())).unwrap(),
+            )],
         };
         let dir = std::env::temp_dir().join(format!("ct-ckpt-{}", std::process::id()));
         let p = dir.join("best.bpk");
@@ -252,6 +265,9 @@ mod tests {
             &dev,
         );
         let a = model.forward(x.clone()).cls_logits.into_data();
+        let Detector::Yolo(loaded) = loaded else {
+            panic!("a YOLO checkpoint loads as YOLO")
+        };
         let b = loaded.forward(x).cls_logits.into_data();
         assert_eq!(a, b);
         assert!(format!("{:#}", back.model("model", &dev).unwrap_err()).contains("no \"model\""));

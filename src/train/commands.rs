@@ -13,11 +13,10 @@ use crate::data::coco::{save_results, Detection};
 use crate::data::dataset::{read_image, RealSet};
 use crate::data::letterbox::Letterbox;
 use crate::data::split::Split;
-use crate::model::yolo::postprocess::postprocess;
 use crate::render::export::instance_color;
 
 use super::checkpoint::{Checkpoint, Stats};
-use super::evaluate::{evaluate_ids, push_planes, to_coco, VAL_IOU, VAL_MAX_DET};
+use super::evaluate::{evaluate_ids, push_planes, to_coco};
 use super::trainer::{device_of, train, TrainOptions, TrainSummary};
 
 /// Confidence threshold of `predict` (ultralytics' predict default).
@@ -89,7 +88,7 @@ pub fn eval_cmd(
         }
         Some(name) => {
             let mut cfg = config::load(name, &[])?;
-            cfg.data.image_size = ck.header.model.input_size as u32;
+            cfg.data.image_size = ck.header.model.input_size() as u32;
             let real = RealSet::load(&cfg.data, cfg.seed)?;
             let split = Split::new(&real.ids(), cfg.data.split, cfg.seed)?;
             (real, split, format!("the data of {name}"))
@@ -209,7 +208,7 @@ pub fn predict_cmd(
     let ck = Checkpoint::load(checkpoint)?;
     let dev = device_of(device.unwrap_or(ck.header.config.device));
     let model = ck.model("ema", &dev)?;
-    let size = ck.header.model.input_size as u32;
+    let size = ck.header.model.input_size() as u32;
     let files = list_images(input)?;
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create {}", out_dir.display()))?;
@@ -225,7 +224,7 @@ pub fn predict_cmd(
             TensorData::new(px, [1, 3, size as usize, size as usize]),
             &dev,
         );
-        let raw = postprocess(&model.forward(x), PREDICT_CONF, VAL_IOU, VAL_MAX_DET);
+        let raw = model.predict(x, PREDICT_CONF);
         let id = k as u64 + 1;
         let dets: Vec<Detection> = raw[0]
             .iter()

@@ -9,14 +9,12 @@ use std::collections::HashMap;
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
 use burn::tensor::Tensor;
 
-use crate::model::yolo::YoloSeg;
-
 /// Decay and ramp of ultralytics' `ModelEMA`.
 pub const DECAY: f64 = 0.9999;
 pub const TAU: f64 = 2000.0;
 
-pub struct Ema {
-    pub model: YoloSeg,
+pub struct Ema<M> {
+    pub model: M,
     pub updates: u64,
 }
 
@@ -48,9 +46,9 @@ impl ModuleMapper for Blend {
     }
 }
 
-impl Ema {
+impl<M: Module> Ema<M> {
     /// Starts from a copy of `model` (eval mode, plain device).
-    pub fn new(model: &YoloSeg, updates: u64) -> Ema {
+    pub fn new(model: &M, updates: u64) -> Ema<M> {
         Ema {
             model: model.valid(),
             updates,
@@ -63,7 +61,7 @@ impl Ema {
     }
 
     /// Blends the current training weights in.
-    pub fn update(&mut self, model: &YoloSeg) {
+    pub fn update(&mut self, model: &M) {
         self.updates += 1;
         let d = Self::decay(self.updates);
         let mut c = Collect(HashMap::new());
@@ -76,7 +74,7 @@ impl Ema {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::yolo::{Scale, YoloSegConfig};
+    use crate::model::yolo::{Scale, YoloSeg, YoloSegConfig};
     use burn::tensor::Device;
 
     fn first_weight(m: &YoloSeg) -> Vec<f32> {
@@ -95,8 +93,9 @@ mod tests {
 
     #[test]
     fn update_blends_with_the_ramped_decay() {
-        assert!(Ema::decay(1) < 0.001);
-        assert!((Ema::decay(1_000_000) - DECAY).abs() < 1e-9);
+        type E = Ema<YoloSeg>;
+        assert!(E::decay(1) < 0.001);
+        assert!((E::decay(1_000_000) - DECAY).abs() < 1e-9);
         let dev = Device::flex();
         let cfg = YoloSegConfig::new(Scale::N, 1)
             .with_input_size(32)
@@ -116,7 +115,7 @@ mod tests {
         let b = a.clone().map(&mut Double);
         ema.update(&b);
         assert_eq!(ema.updates, 3000);
-        let d = Ema::decay(3000) as f32;
+        let d = E::decay(3000) as f32;
         for (e, x) in first_weight(&ema.model).iter().zip(&e0) {
             let want = d * x + (1.0 - d) * 2.0 * x;
             assert!(

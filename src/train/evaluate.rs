@@ -1,6 +1,7 @@
 //! Inference over a split of the real set and COCO evaluation of the result: the model in
-//! eval mode on the plain device, postprocess with validation settings (conf 0.001, NMS
-//! IoU 0.7, 300 detections), boxes and masks mapped back to each image's original size,
+//! eval mode on the plain device, validation settings (YOLO: conf 0.001, NMS IoU 0.7, 300
+//! detections; Mask R-CNN: its own score 0.05, NMS 0.5, 100 detections), boxes and masks
+//! mapped back to each image's original size,
 //! masks as compressed RLE, then the in-tree pycocotools-exact evaluator for bbox and segm.
 
 use anyhow::{Context, Result};
@@ -12,12 +13,13 @@ use crate::data::letterbox::Letterbox;
 use crate::data::mask::Mask;
 use crate::data::rle::Rle;
 use crate::eval::{evaluate, IouType};
-use crate::model::yolo::postprocess::{postprocess, Detection as RawDetection};
-use crate::model::yolo::YoloSeg;
+use crate::model::yolo::postprocess::Detection as RawDetection;
 
 use super::checkpoint::Stats;
+use super::detector::Detector;
 
-/// Validation postprocess settings (ultralytics' val defaults).
+/// Validation postprocess settings of YOLO (ultralytics' val defaults; Mask R-CNN uses
+/// only `VAL_CONF`, below its own threshold).
 pub const VAL_CONF: f32 = 0.001;
 pub const VAL_IOU: f32 = 0.7;
 pub const VAL_MAX_DET: usize = 300;
@@ -63,7 +65,7 @@ pub fn to_coco(
 
 /// Runs `model` on the real images `ids`.
 pub fn predict_ids(
-    model: &YoloSeg,
+    model: &Detector,
     set: &RealSet,
     ids: &[u64],
     device: &Device,
@@ -79,8 +81,7 @@ pub fn predict_ids(
             origs.push(orig);
         }
         let x = Tensor::<4>::from_data(TensorData::new(px, [chunk.len(), 3, size, size]), device);
-        let out = model.forward(x);
-        let raw = postprocess(&out, VAL_CONF, VAL_IOU, VAL_MAX_DET);
+        let raw = model.predict(x, VAL_CONF);
         for ((&id, orig), per) in chunk.iter().zip(&origs).zip(&raw) {
             dets.extend(
                 per.iter()
@@ -104,7 +105,7 @@ pub fn gt_subset(gt: &CocoDataset, ids: &[u64]) -> CocoDataset {
 
 /// bbox and segm COCO stats of `model` on the real images `ids`.
 pub fn evaluate_ids(
-    model: &YoloSeg,
+    model: &Detector,
     set: &RealSet,
     ids: &[u64],
     device: &Device,

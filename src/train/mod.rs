@@ -1,4 +1,4 @@
-//! Training: the loop ([`trainer`]), learning-rate schedule ([`schedule`]), optimisers and
+//! Training: the loop ([`trainer`]) over the trainable models ([`detector`]), learning-rate schedule ([`schedule`]), optimisers and
 //! global-norm clipping ([`optim`]), weight EMA ([`ema`]), checkpoint files
 //! ([`checkpoint`]), per-epoch COCO evaluation ([`evaluate`]), plots ([`plot`]) and
 //! progress bars ([`progress`]). The commands built on it (`train`, `eval`, `predict`)
@@ -6,6 +6,7 @@
 
 pub mod checkpoint;
 pub mod commands;
+pub mod detector;
 pub mod ema;
 pub mod evaluate;
 pub mod interrupt;

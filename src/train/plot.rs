@@ -1,6 +1,7 @@
 //! `plots.png`: per-epoch curves drawn with the `image` crate alone (no font, no plotting
-//! dependency). Left panel: the four training losses, each scaled to its own maximum
-//! (box red, cls green, dfl blue, seg orange). Right panel: validation AP (0–1 axis) —
+//! dependency). Left panel: the training losses, each scaled to its own maximum, in the
+//! model's loss order (YOLO: box red, cls green, dfl blue, seg orange; Mask R-CNN: rpn_cls,
+//! rpn_box, cls, box, mask in red, green, blue, orange, purple). Right panel: validation AP (0–1 axis) —
 //! bbox AP dark blue, bbox AP50 light blue, segm AP dark red, segm AP50 light red.
 //! Grid lines every 0.25 of the axis. The numbers themselves are in `results.csv`.
 
@@ -65,23 +66,33 @@ fn panel(img: &mut RgbImage, ox: u32, series: &[(Vec<f64>, Rgb<u8>)], normalise:
     }
 }
 
-/// Writes `<dir>/plots.png` from the per-epoch metric records.
-pub fn write_plots(dir: &Path, records: &[serde_json::Value]) -> Result<()> {
+/// Colours of the loss curves, in loss order.
+const LOSS_COLOURS: [[u8; 3]; 6] = [
+    [220, 40, 40],
+    [40, 160, 40],
+    [40, 40, 220],
+    [240, 150, 0],
+    [150, 40, 180],
+    [90, 90, 90],
+];
+
+/// Writes `<dir>/plots.png` from the per-epoch metric records (`loss.<name>` for each of
+/// `loss_names`).
+pub fn write_plots(dir: &Path, records: &[serde_json::Value], loss_names: &[&str]) -> Result<()> {
     let get = |f: &dyn Fn(&serde_json::Value) -> Option<f64>| -> Vec<f64> {
         records.iter().map(|r| f(r).unwrap_or(0.0)).collect()
     };
-    let loss = |k: &'static str| get(&move |r| r["loss"][k].as_f64());
+    let loss = |k: &str| get(&|r: &serde_json::Value| r["loss"][k].as_f64());
     let stat = |t: &'static str, i: usize| get(&move |r| r["val"][t]["stats"][i].as_f64());
     let mut img = RgbImage::from_pixel(2 * W, H, Rgb([255, 255, 255]));
     panel(
         &mut img,
         0,
-        &[
-            (loss("box"), Rgb([220, 40, 40])),
-            (loss("cls"), Rgb([40, 160, 40])),
-            (loss("dfl"), Rgb([40, 40, 220])),
-            (loss("seg"), Rgb([240, 150, 0])),
-        ],
+        &loss_names
+            .iter()
+            .zip(LOSS_COLOURS.iter().cycle())
+            .map(|(k, c)| (loss(k), Rgb(*c)))
+            .collect::<Vec<_>>(),
         true,
     );
     panel(

@@ -1,4 +1,5 @@
-//! Learning-rate schedule: linear warmup over `warmup_epochs` (per iteration), then the
+//! Learning-rate schedule: linear warmup over `warmup_epochs` (per iteration) or
+//! `warmup_iters` (the Mask R-CNN paper's 500 iterations), then the
 //! per-epoch factor of ultralytics' schedulers — linear `(1 − e/E)(1 − lrf) + lrf`,
 //! cosine `1 + (lrf − 1)(1 − cos(πe/E))/2` — or the paper's multi-step (×0.1 at each
 //! milestone epoch).
@@ -32,10 +33,19 @@ pub fn epoch_factor(t: &TrainConfig, epoch: usize) -> f64 {
     }
 }
 
+/// Warmup length in iterations: `warmup_iters` when set, else `warmup_epochs` worth.
+fn warmup_len(t: &TrainConfig, per_epoch: usize) -> f64 {
+    if t.warmup_iters > 0 {
+        t.warmup_iters as f64
+    } else {
+        (t.warmup_epochs * per_epoch as f64).round()
+    }
+}
+
 /// Learning rate of iteration `iter` (0-based) of `epoch`, with `per_epoch` iterations.
 pub fn lr_at(t: &TrainConfig, epoch: usize, iter: usize, per_epoch: usize) -> f64 {
     let base = t.lr * epoch_factor(t, epoch);
-    let warm = (t.warmup_epochs * per_epoch as f64).round();
+    let warm = warmup_len(t, per_epoch);
     let global = (epoch * per_epoch + iter) as f64;
     if warm > 0.0 && global < warm {
         base * (global + 1.0) / (warm + 1.0)
@@ -48,7 +58,7 @@ pub fn lr_at(t: &TrainConfig, epoch: usize, iter: usize, per_epoch: usize) -> f6
 /// (or up) to [`lr_at`]'s value over the warmup, then equal to it.
 pub fn bias_lr_at(t: &TrainConfig, epoch: usize, iter: usize, per_epoch: usize) -> f64 {
     let base = t.lr * epoch_factor(t, epoch);
-    let warm = (t.warmup_epochs * per_epoch as f64).round();
+    let warm = warmup_len(t, per_epoch);
     let global = (epoch * per_epoch + iter) as f64;
     if warm > 0.0 && global < warm {
         t.warmup_bias_lr + (base - t.warmup_bias_lr) * (global + 1.0) / (warm + 1.0)
@@ -170,5 +180,16 @@ mod tests {
         assert_eq!(rates.lr_from_param(id, Some("backbone.0.bn.beta")), bias);
         assert_eq!(rates.lr_from_param(id, Some("backbone.0.bn.gamma")), lr);
         assert_eq!(rates.lr_from_param(id, Some("unbiased")), lr);
+    }
+
+    #[test]
+    fn warmup_iters_replaces_warmup_epochs() {
+        let mut t = cfg(ScheduleKind::Multistep);
+        t.warmup_iters = 25; // 2.5 epochs of 10 iterations, whatever warmup_epochs says
+        let per = 10;
+        assert!((lr_at(&t, 0, 0, per) - 0.01 / 26.0).abs() < 1e-12);
+        assert!((lr_at(&t, 2, 4, per) - 0.01 * 25.0 / 26.0).abs() < 1e-12);
+        assert_eq!(lr_at(&t, 2, 5, per), 0.01);
+        assert_eq!(lr_at(&t, 3, 0, per), 0.01);
     }
 }

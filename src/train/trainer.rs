@@ -25,16 +25,15 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde_json::json;
 
-use crate::config::{Config, DeviceKind};
+use crate::config::{Config, DeviceKind, ModelKind};
 use crate::data::augment::{augment, AugmentConfig};
 use crate::data::batch::{collate, Batch};
 use crate::data::dataset::{RealSet, Sample, SyntheticSet};
 use crate::data::split::Split;
-use crate::model::yolo::loss::{yolo_loss, LossWeights};
-use crate::model::yolo::{HeadLevels, Scale, YoloSeg, YoloSegConfig};
 use crate::util::write_atomic;
 
-use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header, Stats};
+use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header, Stats, FORMAT};
+use super::detector::{Detector, DetectorConfig};
 use super::ema::Ema;
 use super::evaluate::evaluate_ids;
 use super::schedule::step_lr;
@@ -70,6 +69,8 @@ pub struct TrainSummary {
 
 /// `--smoke`: any config shrunk to about a minute that still goes through every stage:
 /// 64 px images (no crop), at most 9 real and 4 synthetic images, 2 epochs, batch 4.
+/// A Mask R-CNN keeps its depth (so the R101 code paths run) but gets quarter widths,
+/// anchors sized for 64 px and a few dozen proposals and RoIs.
 pub fn smoke_config(cfg: &mut Config) {
     cfg.name = format!("{}_smoke", cfg.name);
     let d = &mut cfg.data;
@@ -82,7 +83,22 @@ pub fn smoke_config(cfg: &mut Config) {
     t.epochs = t.epochs.min(2);
     t.batch = t.batch.min(4);
     t.warmup_epochs = t.warmup_epochs.min(1.0);
+    t.warmup_iters = t.warmup_iters.min(2);
     t.milestones.retain(|&m| m < t.epochs);
+    let m = &mut cfg.model;
+    if m.kind == ModelKind::Maskrcnn {
+        m.width_mult = m.width_mult.min(0.25);
+        m.fpn_channels = Some(32);
+        m.anchor_sizes = Some(vec![12.0, 24.0, 48.0, 96.0, 192.0]);
+        m.rpn_batch = Some(64);
+        m.rpn_pre_nms_topk_train = Some(200);
+        m.rpn_post_nms_topk_train = Some(50);
+        m.rpn_pre_nms_topk_test = Some(200);
+        m.rpn_post_nms_topk_test = Some(50);
+        m.roi_batch = Some(32);
+        m.box_fc_dim = Some(64);
+        m.mask_conv_dim = Some(32);
+    }
 }
 
 /// The Burn device of a kind.
@@ -95,18 +111,8 @@ pub fn device_of(kind: DeviceKind) -> Device {
 }
 
 /// The model config of a run config with `nc` classes.
-pub fn model_config(cfg: &Config, nc: usize) -> YoloSegConfig {
-    let m = &cfg.model;
-    YoloSegConfig::new(if m.scale == "s" { Scale::S } else { Scale::N }, nc)
-        .with_input_size(cfg.data.image_size as usize)
-        .with_levels(if m.levels == [4, 5] {
-            HeadLevels::P4P5
-        } else {
-            HeadLevels::P3P5
-        })
-        .with_c2psa(m.c2psa)
-        .with_width_mult(m.width_mult)
-        .with_num_masks(m.prototypes)
+pub fn model_config(cfg: &Config, nc: usize) -> Result<DetectorConfig> {
+    DetectorConfig::from_config(cfg, nc)
 }
 
 /// One item of an epoch: a real image id or a synthetic index.
@@ -163,22 +169,22 @@ const STAT_NAMES: [&str; 12] = [
     "AP", "AP50", "AP75", "APs", "APm", "APl", "AR1", "AR10", "AR100", "ARs", "ARm", "ARl",
 ];
 
-fn csv_header() -> String {
+fn csv_header(loss_names: &[&str]) -> String {
     let mut h = vec!["epoch".to_string(), "lr".into(), "time".into()];
-    h.extend(["box", "cls", "dfl", "seg"].map(|s| format!("train/{s}_loss")));
+    h.extend(loss_names.iter().map(|s| format!("train/{s}_loss")));
     for t in ["bbox", "segm"] {
         h.extend(STAT_NAMES.iter().map(|n| format!("val/{t}_{n}")));
     }
     h.join(",")
 }
 
-fn csv_row(m: &serde_json::Value) -> String {
+fn csv_row(m: &serde_json::Value, loss_names: &[&str]) -> String {
     let mut r = vec![
         m["epoch"].to_string(),
         m["lr"].to_string(),
         m["time"].to_string(),
     ];
-    for k in ["box", "cls", "dfl", "seg"] {
+    for k in loss_names {
         r.push(m["loss"][k].to_string());
     }
     for t in ["bbox", "segm"] {
@@ -190,13 +196,13 @@ fn csv_row(m: &serde_json::Value) -> String {
 }
 
 /// Writes `metrics.jsonl` and `results.csv` from the per-epoch records.
-fn write_metrics(dir: &Path, records: &[serde_json::Value]) -> Result<()> {
+fn write_metrics(dir: &Path, records: &[serde_json::Value], loss_names: &[&str]) -> Result<()> {
     let mut jl = String::new();
-    let mut csv = csv_header() + "\n";
+    let mut csv = csv_header(loss_names) + "\n";
     for r in records {
         jl.push_str(&serde_json::to_string(r)?);
         jl.push('\n');
-        csv.push_str(&csv_row(r));
+        csv.push_str(&csv_row(r, loss_names));
         csv.push('\n');
     }
     write_atomic(&dir.join("metrics.jsonl"), jl.as_bytes())?;
@@ -258,6 +264,13 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             );
         }
         let ck = Checkpoint::load(&p)?;
+        if ck.header.model.kind() != cfg.model.kind {
+            // Checked before anything is written to the run folder.
+            let probe = DetectorConfig::from_config(&cfg, ck.header.model.num_classes())?;
+            if let Some(why) = probe.mismatch(&ck.header.model) {
+                bail!("--resume: cannot continue from {}: {why}", p.display());
+            }
+        }
         if ck.header.epoch >= cfg.train.epochs {
             bail!(
                 "--resume: {} already completed {} of {} epochs (raise train.epochs with --set to train longer)",
@@ -319,15 +332,14 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let base = device_of(cfg.device);
     base.seed(cfg.seed);
     let ad = base.clone().autodiff();
-    let mcfg = model_config(&cfg, real.num_classes());
+    let mcfg = model_config(&cfg, real.num_classes())?;
     let mut optim = optim::build(&cfg.train);
     let (mut model, mut ema, start_epoch, mut best_fitness, mut records) = match &resume {
         Some(ck) => {
-            if ck.header.model != mcfg {
+            if let Some(why) = mcfg.mismatch(&ck.header.model) {
                 bail!(
-                    "--resume: the checkpoint's model {:?} differs from the config's {:?}",
-                    ck.header.model,
-                    mcfg
+                    "--resume: cannot continue from {}: {why}",
+                    run_dir.join("last.bpk").display()
                 );
             }
             let model = ck.model("model", &ad)?;
@@ -347,15 +359,12 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         }
     };
     say(format!(
-        "model: YOLO-seg {} {:?}, c2psa {}, width ×{}, {} classes: {} on {:?}",
-        cfg.model.scale,
-        mcfg.levels,
-        mcfg.c2psa,
-        mcfg.width_mult,
-        mcfg.num_classes,
+        "model: {}: {} on {:?}",
+        mcfg.describe(),
         model.summary(cfg.data.image_size as usize),
         cfg.device
     ));
+    let loss_names = model.loss_names();
 
     let data = Data {
         real: real.clone(),
@@ -370,10 +379,9 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let n_items = split.train.len() + cfg.data.synthetic;
     let bsz = cfg.train.batch;
     let per_epoch = n_items.div_ceil(bsz);
-    let weights = LossWeights::default();
     let class_names = real.class_names();
     let header_for = |epoch: usize, best: f64, updates: u64, val: Option<Stats>| Header {
-        format: 1,
+        format: FORMAT,
         chicktrain: env!("CARGO_PKG_VERSION").into(),
         model: mcfg.clone(),
         category_ids: real.cat_ids.clone(),
@@ -410,7 +418,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 &format!("{}/{}", epoch + 1, cfg.train.epochs),
             )
         };
-        let mut sums = [0f64; 4];
+        let mut sums = vec![0f64; loss_names.len()];
         let mut last_lr = 0.0;
         let mut seen = 0usize;
         let mut interrupted: Option<usize> = None;
@@ -431,16 +439,23 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 })?;
                 let n = batch.dims[0];
                 let x = Tensor::<4>::from_data(TensorData::new(batch.pixels, batch.dims), &ad);
-                let out = model.forward(x);
-                let loss = yolo_loss(&out, &batch.targets, &weights);
-                let v = loss.values();
-                for (name, val) in ["box", "cls", "dfl", "seg", "total"].iter().zip(v) {
+                let loss = model.loss(
+                    x,
+                    &batch.targets,
+                    mix(mix(cfg.seed ^ 0x5A3D, epoch as u64), step as u64),
+                );
+                let mut v = loss.terms.clone();
+                v.push(loss.total_value);
+                let mut names = loss_names.to_vec();
+                names.push("total");
+                for (name, &val) in names.iter().zip(&v) {
                     if !val.is_finite() {
                         bail!(
-                            "non-finite loss at epoch {}, step {} of {}: {name} loss = {val} (all terms box/cls/dfl/seg/total = {v:?}); {}",
+                            "non-finite loss at epoch {}, step {} of {}: {name} loss = {val} (all terms {} = {v:?}); {}",
                             epoch + 1,
                             step + 1,
                             per_epoch,
+                            names.join("/"),
                             if epoch > start_epoch || start_epoch > 0 {
                                 "last.bpk holds the last good epoch"
                             } else {
@@ -463,8 +478,8 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 if cfg.train.ema {
                     ema.update(&model);
                 }
-                for k in 0..4 {
-                    sums[k] += v[k] as f64;
+                for (s, t) in sums.iter_mut().zip(&loss.terms) {
+                    *s += *t as f64;
                 }
                 last_lr = lr;
                 seen += 1;
@@ -472,7 +487,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 let el = te.elapsed().as_secs_f64();
                 bar.set_message(format!(
                     "loss {:.3} {:.2} img/s",
-                    v[4] / n as f32,
+                    loss.total_value / n as f32,
                     (seen * bsz) as f64 / el.max(1e-9)
                 ));
                 bar.inc(1);
@@ -515,7 +530,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         train_secs += t_train;
 
         // Evaluate.
-        let eval_model: YoloSeg = if cfg.train.ema {
+        let eval_model: Detector = if cfg.train.ema {
             ema.model.clone()
         } else {
             model.valid()
@@ -526,7 +541,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         let rec = json!({
             "epoch": epoch + 1,
             "lr": last_lr,
-            "loss": {"box": sums[0] / steps, "cls": sums[1] / steps, "dfl": sums[2] / steps, "seg": sums[3] / steps},
+            "loss": loss_names.iter().zip(&sums).map(|(k, s)| (k.to_string(), json!(s / steps))).collect::<serde_json::Map<_, _>>(),
             "time": secs,
             "train_time": t_train,
             "images_per_s": (seen * bsz).min(n_items) as f64 / t_train.max(1e-9),
@@ -534,7 +549,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             "proxy": real.proxy,
         });
         records.push(rec);
-        write_metrics(&run_dir, &records)?;
+        write_metrics(&run_dir, &records, loss_names)?;
 
         // Checkpoints.
         let fitness = val.segm[0];
@@ -562,14 +577,16 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         }
         .save(&run_dir.join("last.bpk"))?;
         say(format!(
-            "epoch {}/{}  lr {:.2e}  loss box {:.3} cls {:.3} dfl {:.3} seg {:.3}  {:.1} s ({:.2} img/s)  val bbox AP {:.3} AP50 {:.3}  segm AP {:.3} AP50 {:.3}{}",
+            "epoch {}/{}  lr {:.2e}  loss {}  {:.1} s ({:.2} img/s)  val bbox AP {:.3} AP50 {:.3}  segm AP {:.3} AP50 {:.3}{}",
             epoch + 1,
             cfg.train.epochs,
             last_lr,
-            sums[0] / steps,
-            sums[1] / steps,
-            sums[2] / steps,
-            sums[3] / steps,
+            loss_names
+                .iter()
+                .zip(&sums)
+                .map(|(k, s)| format!("{k} {:.3}", s / steps))
+                .collect::<Vec<_>>()
+                .join(" "),
             secs,
             (seen * bsz).min(n_items) as f64 / t_train.max(1e-9),
             val.bbox[0],
@@ -597,7 +614,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         &run_dir.join("test.json"),
         serde_json::to_string_pretty(&test_json)?.as_bytes(),
     )?;
-    super::plot::write_plots(&run_dir, &records)?;
+    super::plot::write_plots(&run_dir, &records, loss_names)?;
     Ok(TrainSummary {
         run_dir,
         epochs: cfg.train.epochs,
