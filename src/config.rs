@@ -378,6 +378,10 @@ pub struct TrainConfig {
     pub nesterov: bool,
     #[serde(default = "default_warmup")]
     pub warmup_epochs: f64,
+    /// Learning rate biases start warmup at, falling linearly to `lr` (ultralytics'
+    /// `warmup_bias_lr`, 0.1 in its SGD recipe; 0 = biases warm up like weights).
+    #[serde(default)]
+    pub warmup_bias_lr: f64,
     /// Warmup length in iterations (the Mask R-CNN paper: 500); when > 0 it replaces
     /// `warmup_epochs`.
     #[serde(default)]
@@ -608,6 +612,12 @@ impl Config {
         }
         if !(t.warmup_epochs.is_finite() && t.warmup_epochs >= 0.0) {
             bail!("train.warmup_epochs = {} must be >= 0", t.warmup_epochs);
+        }
+        if !(t.warmup_bias_lr.is_finite() && (0.0..=1.0).contains(&t.warmup_bias_lr)) {
+            bail!(
+                "train.warmup_bias_lr = {} must be in [0, 1]",
+                t.warmup_bias_lr
+            );
         }
         if !(t.grad_clip.is_finite() && t.grad_clip > 0.0) {
             bail!("train.grad_clip = {} must be positive", t.grad_clip);

@@ -4,8 +4,8 @@
 //!
 //! The real set keeps its COCO ground truth at the *original* image size (that is what
 //! the evaluator scores against) and decodes images lazily, one per request, so a
-//! 300-photo set does not sit in memory. Images of any size are resized (stretched) to
-//! `image_size × image_size`; predictions are scaled back by the inverse factors. Gray,
+//! 300-photo set does not sit in memory. Images of any shape are letterboxed into
+//! `image_size × image_size` ([`Letterbox`]); predictions are mapped back by its inverse. Gray,
 //! RGBA and 16-bit images are converted to RGB8. Missing or corrupt files fail with the
 //! file's path.
 //!
@@ -16,12 +16,13 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use image::{imageops::FilterType, RgbImage};
+use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::config::{DataConfig, RealKind};
 use crate::data::coco::{CocoCategory, CocoDataset, CocoImage};
 use crate::data::labelme;
+use crate::data::letterbox::Letterbox;
 use crate::data::mask::Mask;
 use crate::render::export::{annotations, visible_mask, CARCASS_CATEGORY};
 use crate::render::stream::{cache_key, effective_seed, load_or_render};
@@ -296,12 +297,7 @@ impl RealSet {
             }
         };
         let orig = (im.width, im.height);
-        let img = if img.dimensions() == (self.size, self.size) {
-            img
-        } else {
-            image::imageops::resize(&img, self.size, self.size, FilterType::Triangle)
-        };
-        Ok((img, orig))
+        Ok((Letterbox::new(orig, self.size).image(&img), orig))
     }
 
     /// Image and non-crowd instances at the network input size.
@@ -319,7 +315,7 @@ impl RealSet {
                 .segmentation
                 .to_rle(h, w)
                 .with_context(|| format!("annotation {} of image {id}", a.id))?;
-            let mask = resize_mask(&rle.decode(), self.size, self.size);
+            let mask = Letterbox::new((w, h), self.size).mask(&rle.decode());
             if mask.area() > 0 {
                 instances.push(Instance { class, mask });
             }

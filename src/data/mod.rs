@@ -6,6 +6,7 @@ pub mod batch;
 pub mod coco;
 pub mod dataset;
 pub mod labelme;
+pub mod letterbox;
 pub mod mask;
 pub mod polygon;
 pub mod rle;

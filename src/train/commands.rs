@@ -5,12 +5,13 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use burn::tensor::{Tensor, TensorData};
-use image::{imageops::FilterType, Rgb, RgbImage};
+use image::{Rgb, RgbImage};
 use serde_json::json;
 
 use crate::config::{self, DeviceKind};
 use crate::data::coco::{save_results, Detection};
 use crate::data::dataset::{read_image, RealSet};
+use crate::data::letterbox::Letterbox;
 use crate::data::split::Split;
 use crate::render::export::instance_color;
 
@@ -216,11 +217,7 @@ pub fn predict_cmd(
     for (k, f) in files.iter().enumerate() {
         let img = read_image(f)?;
         let (w, h) = img.dimensions();
-        let small = if (w, h) == (size, size) {
-            img.clone()
-        } else {
-            image::imageops::resize(&img, size, size, FilterType::Triangle)
-        };
+        let small = Letterbox::new((w, h), size).image(&img);
         let mut px = Vec::new();
         push_planes(&small, &mut px);
         let x = Tensor::<4>::from_data(

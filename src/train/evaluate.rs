@@ -8,7 +8,8 @@ use anyhow::{Context, Result};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::data::coco::{CocoDataset, Detection, Segmentation};
-use crate::data::dataset::{resize_mask, RealSet};
+use crate::data::dataset::RealSet;
+use crate::data::letterbox::Letterbox;
 use crate::data::mask::Mask;
 use crate::data::rle::Rle;
 use crate::eval::{evaluate, IouType};
@@ -37,8 +38,8 @@ pub fn push_planes(img: &image::RgbImage, out: &mut Vec<f32>) {
     }
 }
 
-/// Maps one raw detection (at the `size × size` input) to a COCO detection of an image
-/// of `orig = (width, height)`.
+/// Maps one raw detection (at the letterboxed `size × size` input) to a COCO detection
+/// of an image of `orig = (width, height)`.
 pub fn to_coco(
     d: &RawDetection,
     image_id: u64,
@@ -46,26 +47,19 @@ pub fn to_coco(
     size: u32,
     orig: (u32, u32),
 ) -> Detection {
-    let (w, h) = orig;
-    let sx = w as f64 / size as f64;
-    let sy = h as f64 / size as f64;
-    let s = size as f64;
-    let x1 = (d.bbox[0] as f64).clamp(0.0, s);
-    let y1 = (d.bbox[1] as f64).clamp(0.0, s);
-    let x2 = (d.bbox[0] as f64 + d.bbox[2] as f64).clamp(0.0, s);
-    let y2 = (d.bbox[1] as f64 + d.bbox[3] as f64).clamp(0.0, s);
+    let lb = Letterbox::new(orig, size);
+    let b = d.bbox.map(|v| v as f64);
     let m = Mask {
         height: size,
         width: size,
         data: d.mask.clone(),
     };
-    let m = resize_mask(&m, w, h);
     Detection {
         image_id,
         category_id: cat_ids.get(d.class).copied().unwrap_or(d.class as u64 + 1),
         score: d.score as f64,
-        bbox: Some([x1 * sx, y1 * sy, (x2 - x1) * sx, (y2 - y1) * sy]),
-        segmentation: Some(Segmentation::from_rle(&Rle::encode(&m))),
+        bbox: Some(lb.unbox([b[0], b[1], b[0] + b[2], b[1] + b[3]])),
+        segmentation: Some(Segmentation::from_rle(&Rle::encode(&lb.unmask(&m)))),
     }
 }
 

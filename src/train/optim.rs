@@ -214,4 +214,47 @@ mod tests {
         assert!((clip_global_norm(&model, &mut grads, 10.0).unwrap() - n1).abs() < 1e-9);
         assert!((grad_norm(&model, &grads) - n1).abs() < 1e-6);
     }
+
+    /// The per-group learning rate of warmup reaches the right parameters: with rate 0
+    /// for weights and 1 for the bias group, only biases and BatchNorm β move.
+    #[test]
+    fn bias_group_gets_its_own_learning_rate() {
+        use burn::optim::lr_scheduler::module_lr_scheduler::ModuleLrScheduler;
+        let dev = Device::flex().autodiff();
+        let model = tiny_model(&dev);
+        let mut t = TrainConfig::default();
+        t.weight_decay = 0.0;
+        t.momentum = 0.0;
+        let mut opt = build(&t);
+        let out = model.forward(burn::tensor::Tensor::ones([1, 3, 32, 32], &dev));
+        let loss = out.cls_logits.sum() + out.proto.sum() + out.box_dist.sum();
+        let grads = GradientsParams::from_grads(loss.backward(), &model);
+        let mut before = Paths {
+            stack: vec![],
+            out: vec![],
+        };
+        model.valid().visit(&mut before);
+        let group = ParamGroup::from_regex(crate::train::schedule::BIAS).unwrap();
+        let rates = ModuleLrScheduler::new(0.0).with_group(group, 1.0).step();
+        let after_model = opt.step(rates, model, grads);
+        let mut after = Paths {
+            stack: vec![],
+            out: vec![],
+        };
+        after_model.valid().visit(&mut after);
+        let (mut biases, mut weights) = (0, 0);
+        for ((path, a), (_, b)) in before.out.iter().zip(&after.out) {
+            let moved = a.iter().zip(b).any(|(x, y)| (x - y).abs() > 1e-7);
+            if path.ends_with("bias") || path.ends_with("beta") {
+                biases += moved as usize;
+            } else if path.ends_with("weight") || path.ends_with("gamma") {
+                assert!(!moved, "{path} moved at learning rate 0");
+                weights += 1;
+            }
+        }
+        assert!(
+            biases > 10 && weights > 10,
+            "{biases} biases moved, {weights} weights"
+        );
+    }
 }

@@ -4,11 +4,19 @@
 //! cosine `1 + (lrf − 1)(1 − cos(πe/E))/2` — or the paper's multi-step (×0.1 at each
 //! milestone epoch).
 //!
-//! Warmup ramps every parameter from 0 (ultralytics starts biases at 0.1 and ramps
-//! momentum 0.8 → 0.937; Burn's optimisers take one learning rate per step and a fixed
-//! momentum, so neither is reproduced).
+//! Warmup ramps weights from 0 and biases (incl. normalisation shifts) from
+//! `warmup_bias_lr`, like ultralytics, through a per-group learning rate. Ultralytics
+//! also ramps SGD momentum 0.8 → 0.937 during warmup; Burn's optimisers hold a fixed
+//! momentum, so that part is not reproduced.
+
+use burn::module::ParamGroup;
+use burn::optim::lr_scheduler::module_lr_scheduler::{ModuleLearningRate, ModuleLrScheduler};
 
 use crate::config::{ScheduleKind, TrainConfig};
+
+/// Parameters that warm up from `warmup_bias_lr`: biases and normalisation shifts
+/// (ultralytics' bias group, `"bias" in name`).
+pub const BIAS: &str = r"(^|\.)(bias|beta)$";
 
 /// Factor of `lr` at (0-based) `epoch`, before warmup.
 pub fn epoch_factor(t: &TrainConfig, epoch: usize) -> f64 {
@@ -25,20 +33,54 @@ pub fn epoch_factor(t: &TrainConfig, epoch: usize) -> f64 {
     }
 }
 
-/// Learning rate of iteration `iter` (0-based) of `epoch`, with `per_epoch` iterations.
-pub fn lr_at(t: &TrainConfig, epoch: usize, iter: usize, per_epoch: usize) -> f64 {
-    let base = t.lr * epoch_factor(t, epoch);
-    let warm = if t.warmup_iters > 0 {
+/// Warmup length in iterations: `warmup_iters` when set, else `warmup_epochs` worth.
+fn warmup_len(t: &TrainConfig, per_epoch: usize) -> f64 {
+    if t.warmup_iters > 0 {
         t.warmup_iters as f64
     } else {
         (t.warmup_epochs * per_epoch as f64).round()
-    };
+    }
+}
+
+/// Learning rate of iteration `iter` (0-based) of `epoch`, with `per_epoch` iterations.
+pub fn lr_at(t: &TrainConfig, epoch: usize, iter: usize, per_epoch: usize) -> f64 {
+    let base = t.lr * epoch_factor(t, epoch);
+    let warm = warmup_len(t, per_epoch);
     let global = (epoch * per_epoch + iter) as f64;
     if warm > 0.0 && global < warm {
         base * (global + 1.0) / (warm + 1.0)
     } else {
         base
     }
+}
+
+/// Learning rate of biases at iteration `iter` of `epoch`: from `warmup_bias_lr` down
+/// (or up) to [`lr_at`]'s value over the warmup, then equal to it.
+pub fn bias_lr_at(t: &TrainConfig, epoch: usize, iter: usize, per_epoch: usize) -> f64 {
+    let base = t.lr * epoch_factor(t, epoch);
+    let warm = warmup_len(t, per_epoch);
+    let global = (epoch * per_epoch + iter) as f64;
+    if warm > 0.0 && global < warm {
+        t.warmup_bias_lr + (base - t.warmup_bias_lr) * (global + 1.0) / (warm + 1.0)
+    } else {
+        base
+    }
+}
+
+/// The per-parameter learning rates of one optimiser step, and the weights' rate (logged).
+pub fn step_lr(
+    t: &TrainConfig,
+    epoch: usize,
+    iter: usize,
+    per_epoch: usize,
+) -> (ModuleLearningRate, f64) {
+    let lr = lr_at(t, epoch, iter, per_epoch);
+    let bias = bias_lr_at(t, epoch, iter, per_epoch);
+    let group = ParamGroup::from_regex(BIAS).expect("BIAS is a valid regex");
+    (
+        ModuleLrScheduler::new(lr).with_group(group, bias).step(),
+        lr,
+    )
 }
 
 #[cfg(test)]
@@ -101,6 +143,43 @@ mod tests {
         let mut no = t.clone();
         no.warmup_epochs = 0.0;
         assert_eq!(lr_at(&no, 0, 0, per), 0.01);
+    }
+
+    #[test]
+    fn biases_warm_down_from_warmup_bias_lr() {
+        let mut t = cfg(ScheduleKind::Linear);
+        t.warmup_bias_lr = 0.1;
+        let per = 10;
+        let b: Vec<f64> = (0..40)
+            .map(|i| bias_lr_at(&t, i / per, i % per, per))
+            .collect();
+        assert!(b[0] > 0.09 && b[0] < 0.1, "{}", b[0]);
+        for w in b[..30].windows(2) {
+            assert!(w[1] < w[0]);
+        }
+        assert_eq!(b[35], lr_at(&t, 3, 5, per));
+        // 0 = biases follow the weights.
+        t.warmup_bias_lr = 0.0;
+        for i in 0..40 {
+            assert_eq!(
+                bias_lr_at(&t, i / per, i % per, per),
+                lr_at(&t, i / per, i % per, per)
+            );
+        }
+    }
+
+    #[test]
+    fn step_lr_gives_biases_and_shifts_their_own_rate() {
+        let mut t = cfg(ScheduleKind::Linear);
+        t.warmup_bias_lr = 0.1;
+        let (rates, lr) = step_lr(&t, 0, 0, 10);
+        let id = burn::module::ParamId::new();
+        let bias = bias_lr_at(&t, 0, 0, 10);
+        assert_eq!(rates.lr_from_param(id, Some("head.cv2.0.conv.weight")), lr);
+        assert_eq!(rates.lr_from_param(id, Some("head.cv2.0.bias")), bias);
+        assert_eq!(rates.lr_from_param(id, Some("backbone.0.bn.beta")), bias);
+        assert_eq!(rates.lr_from_param(id, Some("backbone.0.bn.gamma")), lr);
+        assert_eq!(rates.lr_from_param(id, Some("unbiased")), lr);
     }
 
     #[test]

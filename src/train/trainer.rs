@@ -36,7 +36,7 @@ use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header, Stats, FO
 use super::detector::{Detector, DetectorConfig};
 use super::ema::Ema;
 use super::evaluate::evaluate_ids;
-use super::schedule::lr_at;
+use super::schedule::step_lr;
 use super::{optim, progress};
 
 /// How to run (everything that is not in the config file).
@@ -473,8 +473,8 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                         step + 1
                     );
                 }
-                let lr = lr_at(&cfg.train, epoch, step, per_epoch);
-                model = optim.step(lr, model.clone(), grads);
+                let (rates, lr) = step_lr(&cfg.train, epoch, step, per_epoch);
+                model = optim.step(rates, model.clone(), grads);
                 if cfg.train.ema {
                     ema.update(&model);
                 }
