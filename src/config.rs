@@ -200,7 +200,7 @@ pub enum MaskRcnnPreset {
 
 /// `[model]`. One flat table for both kinds so `--set model.depth=101` works; keys of the
 /// other kind are rejected by [`Config::validate`] (they stay `None` unless given), and
-/// [`Config::resolve`] fills in the defaults of the chosen kind so the resolved
+/// [`Config::resolve`] fills in the main defaults of the chosen kind so the resolved
 /// `config.toml` lists every value the model was built with.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -700,8 +700,9 @@ impl Config {
         Ok(())
     }
 
-    /// Fills in the defaults of the chosen model kind (call after [`Config::validate`]), so
-    /// the resolved config written to a run folder names every model value.
+    /// Fills in the defaults of the chosen model kind (call after [`Config::validate`]): all
+    /// YOLO keys, and a Mask R-CNN's depth and preset (the preset's sizes stay implicit; the
+    /// checkpoint header holds the complete model config).
     pub fn resolve(&mut self) {
         let m = &mut self.model;
         match m.kind {
