@@ -200,8 +200,8 @@ pub enum MaskRcnnPreset {
 
 /// `[model]`. One flat table for both kinds so `--set model.depth=101` works; keys of the
 /// other kind are rejected by [`Config::validate`] (they stay `None` unless given), and
-/// [`Config::resolve`] fills in the main defaults of the chosen kind so the resolved
-/// `config.toml` lists every value the model was built with.
+/// [`Config::resolve`] writes the chosen kind's main defaults into the resolved
+/// `config.toml` of a run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelConfig {
