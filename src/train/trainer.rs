@@ -4,8 +4,9 @@
 //! Run directory (`runs/<name>/` or `--run-dir`): `config.toml` (resolved), `split.json`,
 //! `metrics.jsonl` (one object per epoch), `results.csv`, `best.bpk`, `last.bpk`,
 //! `test.json`, and `plots.png` when plotting is built in. Every file is written
-//! atomically. A non-finite loss stops the run with an error naming the epoch, step and
-//! loss term; `last.bpk` then still holds the last good epoch.
+//! atomically. A diverging run (non-finite or exploding loss, see [`super::divergence`])
+//! stops with an error naming the epoch, step and loss term; `last.bpk` then still holds
+//! the last good epoch.
 //!
 //! Batches are built on a loader thread (rendering, decoding and augmenting the next
 //! batch in parallel with rayon) while the current step runs; each item's augmentation
@@ -35,6 +36,7 @@ use crate::model::yolo::{HeadLevels, Scale, YoloSeg, YoloSegConfig};
 use crate::util::write_atomic;
 
 use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header, Stats};
+use super::divergence::{check_weights, At, DivergenceGuard};
 use super::ema::Ema;
 use super::evaluate::evaluate_ids;
 use super::schedule::lr_at;
@@ -399,6 +401,7 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             .unwrap_or(0) as usize
     });
     let (mut train_imgs, mut train_secs) = (0usize, 0f64);
+    let mut guard = DivergenceGuard::new(&["box", "cls", "dfl", "seg", "total"]);
     for epoch in start_epoch..cfg.train.epochs {
         let te = Instant::now();
         let plan = epoch_plan(&split.train, cfg.data.synthetic, cfg.seed, epoch);
@@ -434,30 +437,15 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 let out = model.forward(x);
                 let loss = yolo_loss(&out, &batch.targets, &weights);
                 let v = loss.values();
-                for (name, val) in ["box", "cls", "dfl", "seg", "total"].iter().zip(v) {
-                    if !val.is_finite() {
-                        bail!(
-                            "non-finite loss at epoch {}, step {} of {}: {name} loss = {val} (all terms box/cls/dfl/seg/total = {v:?}); {}",
-                            epoch + 1,
-                            step + 1,
-                            per_epoch,
-                            if epoch > start_epoch || start_epoch > 0 {
-                                "last.bpk holds the last good epoch"
-                            } else {
-                                "no checkpoint was written yet"
-                            }
-                        );
-                    }
-                }
+                let at = At {
+                    epoch,
+                    step,
+                    per_epoch,
+                };
+                guard.check_step(at, &v)?;
                 let mut grads = GradientsParams::from_grads(loss.total.backward(), &model);
                 let norm = optim::clip_global_norm(&model, &mut grads, cfg.train.grad_clip)?;
-                if !norm.is_finite() {
-                    bail!(
-                        "non-finite gradient norm {norm} at epoch {}, step {}",
-                        epoch + 1,
-                        step + 1
-                    );
-                }
+                guard.check_grad_norm(at, norm)?;
                 let lr = lr_at(&cfg.train, epoch, step, per_epoch);
                 model = optim.step(lr, model.clone(), grads);
                 if cfg.train.ema {
@@ -513,6 +501,10 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         }
         let t_train = te.elapsed().as_secs_f64();
         train_secs += t_train;
+        check_weights(&model.valid(), "model", epoch)?;
+        if cfg.train.ema {
+            check_weights(&ema.model, "EMA", epoch)?;
+        }
 
         // Evaluate.
         let eval_model: YoloSeg = if cfg.train.ema {
