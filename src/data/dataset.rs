@@ -55,32 +55,7 @@ pub fn render_options(proxy: bool, size: u32) -> RenderOptions {
     o
 }
 
-/// Converts any decoded image (gray, RGBA, 16-bit, …) to RGB8.
-pub fn to_rgb8(img: image::DynamicImage) -> RgbImage {
-    match img {
-        image::DynamicImage::ImageRgb8(i) => i,
-        other => other.to_rgb8(),
-    }
-}
-
-/// Decodes an image file to RGB8, naming the file in every error.
-pub fn read_image(path: &Path) -> Result<RgbImage> {
-    if !path.exists() {
-        bail!("image file {} does not exist", path.display());
-    }
-    let img = image::ImageReader::open(path)
-        .with_context(|| format!("cannot open image {}", path.display()))?
-        .with_guessed_format()
-        .with_context(|| format!("cannot read image {}", path.display()))?
-        .decode()
-        .with_context(|| {
-            format!(
-                "cannot decode image {} (corrupt or unsupported)",
-                path.display()
-            )
-        })?;
-    Ok(to_rgb8(img))
-}
+pub use super::image_file::{read_image, to_rgb8};
 
 /// Resizes a mask with nearest-neighbour sampling (pixel centres).
 pub fn resize_mask(m: &Mask, width: u32, height: u32) -> Mask {
