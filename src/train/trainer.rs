@@ -332,12 +332,13 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                     mcfg
                 );
             }
-            let model = ck.model("model", &ad)?;
+            let in_last = || format!("--resume: in {}", run_dir.join("last.bpk").display());
+            let model = ck.model("model", &ad).with_context(in_last)?;
             let ema = Ema {
-                model: ck.model("ema", &base)?,
+                model: ck.model("ema", &base).with_context(in_last)?,
                 updates: ck.header.ema_updates,
             };
-            optim = ck.optimizer(optim)?;
+            optim = ck.optimizer(optim).with_context(in_last)?;
             let recs = read_metrics(&run_dir, ck.header.epoch)?;
             say(format!("resuming after epoch {}", ck.header.epoch));
             (model, ema, ck.header.epoch, ck.header.best_fitness, recs)
