@@ -1,5 +1,5 @@
 //! COCO compressed RLE strings → counts: never panics; what decodes re-encodes to the
-//! same counts, and its area and box stay inside the image.
+//! same counts, and its area (and, when canonical, its box) stays inside the image.
 #![no_main]
 
 use chicktrain::data::rle::Rle;
@@ -20,7 +20,13 @@ fuzz_target!(|data: &[u8]| {
         assert_eq!(back, rle);
         let m = rle.decode();
         assert_eq!(m.area(), rle.area());
-        let b = rle.bbox();
-        assert!(b[0] >= 0.0 && b[1] >= 0.0 && b[0] + b[2] <= w as f64 && b[1] + b[3] <= h as f64);
+        // pycocotools' rleToBbox puts the box of a non-canonical RLE (a zero-length run
+        // after the first, e.g. `^i00` = [814, 0]) outside the image; chicktrain keeps
+        // that for parity, so the box invariant holds for canonical RLEs only.
+        if rle.counts.iter().skip(1).all(|&c| c > 0) {
+            let b = rle.bbox();
+            assert!(b[0] >= 0.0 && b[1] >= 0.0);
+            assert!(b[0] + b[2] <= w as f64 && b[1] + b[3] <= h as f64, "{b:?}");
+        }
     }
 });
