@@ -186,6 +186,7 @@ fn gray_16bit_rgba_and_exif_images_train_and_predict() {
         .expect("overlay of exif.jpg");
     assert_eq!(image::image_dimensions(&overlay).unwrap(), (64, 48));
     std::fs::remove_dir_all(&d).unwrap();
+    std::fs::remove_file(coco_path(&d)).unwrap();
 }
 
 #[test]
