@@ -107,6 +107,7 @@ pub fn bench_render(size: u32, images: usize, preset: &str, seed: u64) -> Result
 }
 
 /// `chicktrain train` / `chicktrain --config X`: see [`crate::train::commands::train_cmd`].
+#[cfg(feature = "train")]
 pub fn train(
     config_name: &str,
     overrides: &[String],

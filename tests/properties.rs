@@ -1,11 +1,13 @@
 //! Property tests for the mask and box primitives every metric and label rests on:
-//! RLE round trips, IoU bounds and symmetry, merge = pixel union/intersection, and that
-//! arbitrary (hostile) strings and polygons give errors or results, never panics.
+//! RLE round trips, IoU bounds and symmetry, merge = pixel union/intersection, the
+//! R-CNN box coder's encode/decode round trip and clamp, and that arbitrary (hostile)
+//! strings and polygons give errors or results, never panics.
 
 use chicktrain::data::coco::Segmentation;
 use chicktrain::data::mask::Mask;
 use chicktrain::data::polygon::{mask_to_polygons, rle_from_polygons};
 use chicktrain::data::rle::{bbox_iou, rle_iou, Rle};
+use chicktrain::model::maskrcnn::box_coder::BoxCoder;
 use proptest::prelude::*;
 
 fn mask_strategy() -> impl Strategy<Value = Mask> {
@@ -16,6 +18,12 @@ fn mask_strategy() -> impl Strategy<Value = Mask> {
             },
         )
     })
+}
+
+/// xyxy boxes with sides from 0.5 to 1e4 px anywhere in ±1e4.
+fn xyxy_strategy() -> impl Strategy<Value = [f32; 4]> {
+    (-1e4f32..1e4, -1e4f32..1e4, 0.5f32..1e4, 0.5f32..1e4)
+        .prop_map(|(x, y, w, h)| [x, y, x + w, y + h])
 }
 
 fn box_strategy() -> impl Strategy<Value = [f64; 4]> {
@@ -96,5 +104,32 @@ proptest! {
                 prop_assert!(*a == 0 || *b != 0);
             }
         }
+    }
+
+    #[test]
+    fn box_coder_round_trips(src in xyxy_strategy(), dst in xyxy_strategy(), roi in any::<bool>()) {
+        let c = if roi { BoxCoder::roi() } else { BoxCoder::rpn() };
+        let d = c.encode(src, dst);
+        prop_assert!(d.iter().all(|v| v.is_finite()), "{d:?}");
+        // Size ratios beyond exp(scale_clamp) = 62.5 are clamped by decode on purpose.
+        let ratio = |a: f32, b: f32| (a / b).max(b / a);
+        if ratio(dst[2] - dst[0], src[2] - src[0]) < 60.0 && ratio(dst[3] - dst[1], src[3] - src[1]) < 60.0 {
+            let back = c.decode(d, src);
+            let scale = src.iter().chain(&dst).fold(1.0f32, |m, v| m.max(v.abs()));
+            for k in 0..4 {
+                prop_assert!((back[k] - dst[k]).abs() <= 1e-4 * scale, "{back:?} vs {dst:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn box_decode_is_finite_and_clamped(src in xyxy_strategy(),
+        d in proptest::array::uniform4(-1e3f32..1e3)) {
+        let c = BoxCoder::rpn();
+        let b = c.decode(d, src);
+        prop_assert!(b.iter().all(|v| v.is_finite()), "{b:?}");
+        prop_assert!(b[2] >= b[0] && b[3] >= b[1]);
+        let max_w = (src[2] - src[0]) * c.scale_clamp.exp();
+        prop_assert!(b[2] - b[0] <= max_w * (1.0 + 1e-5) + 1e-3, "{b:?} wider than {max_w}");
     }
 }

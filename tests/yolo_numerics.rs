@@ -177,3 +177,34 @@ fn p4_p5_model_without_attention_trains_a_step() {
     let g = g.into_data().try_into_vec::<f32>().unwrap();
     assert!(g.iter().all(|x| x.is_finite()) && g.iter().any(|&x| x != 0.0));
 }
+
+/// The other extremes of the issue: boxes of 1e4 px (far larger than the image), 200 GT
+/// in one image, identical duplicate boxes, and instances whose mask is empty (a box
+/// without pixels, e.g. a sliver cut away by the crop).
+#[test]
+fn finite_with_huge_crowded_duplicate_and_maskless_targets() {
+    let dev = Device::flex().autodiff();
+    let crowd: Vec<[f32; 4]> = (0..200)
+        .map(|i| {
+            let (x, y) = ((i % 20) as f32 * 3.0, (i / 20) as f32 * 6.0);
+            [x, y, x + 4.0 + (i % 7) as f32, y + 5.0]
+        })
+        .collect();
+    let mut maskless = image(&[[8.0, 8.0, 40.0, 40.0], [20.0, 30.0, 60.0, 50.0]]);
+    maskless.masks.iter_mut().for_each(|m| m.fill(0));
+    let t = YoloTargets {
+        images: vec![
+            image(&[[-5000.0, -5000.0, 5000.0, 5000.0], [0.0, 0.0, 1e4, 30.0]]),
+            image(&crowd),
+            image(&[[12.0, 12.0, 40.0, 44.0]; 6]),
+            maskless,
+        ],
+    };
+    for (what, fill) in [
+        ("normal", &normal as &dyn Fn([usize; 4]) -> Tensor<4>),
+        ("±1e4", &saturated),
+    ] {
+        let fg = assert_finite(&dev, &t, fill, what);
+        assert!(fg > 0, "{what}: positives assigned");
+    }
+}

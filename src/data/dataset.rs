@@ -23,6 +23,7 @@ use crate::config::{DataConfig, RealKind};
 use crate::data::coco::{CocoCategory, CocoDataset, CocoImage};
 use crate::data::labelme;
 use crate::data::letterbox::Letterbox;
+pub use crate::data::mask::resize_mask;
 use crate::data::mask::Mask;
 use crate::render::export::{annotations, visible_mask, CARCASS_CATEGORY};
 use crate::render::stream::{cache_key, effective_seed, load_or_render};
@@ -56,48 +57,7 @@ pub fn render_options(proxy: bool, size: u32) -> RenderOptions {
     o
 }
 
-/// Converts any decoded image (gray, RGBA, 16-bit, …) to RGB8.
-pub fn to_rgb8(img: image::DynamicImage) -> RgbImage {
-    match img {
-        image::DynamicImage::ImageRgb8(i) => i,
-        other => other.to_rgb8(),
-    }
-}
-
-/// Decodes an image file to RGB8, naming the file in every error.
-pub fn read_image(path: &Path) -> Result<RgbImage> {
-    if !path.exists() {
-        bail!("image file {} does not exist", path.display());
-    }
-    let img = image::ImageReader::open(path)
-        .with_context(|| format!("cannot open image {}", path.display()))?
-        .with_guessed_format()
-        .with_context(|| format!("cannot read image {}", path.display()))?
-        .decode()
-        .with_context(|| {
-            format!(
-                "cannot decode image {} (corrupt or unsupported)",
-                path.display()
-            )
-        })?;
-    Ok(to_rgb8(img))
-}
-
-/// Resizes a mask with nearest-neighbour sampling (pixel centres).
-pub fn resize_mask(m: &Mask, width: u32, height: u32) -> Mask {
-    if m.width == width && m.height == height {
-        return m.clone();
-    }
-    let mut out = Mask::new(height, width);
-    for y in 0..height {
-        let sy = (((y as f64 + 0.5) * m.height as f64 / height as f64) as u32).min(m.height - 1);
-        for x in 0..width {
-            let sx = (((x as f64 + 0.5) * m.width as f64 / width as f64) as u32).min(m.width - 1);
-            out.data[(y * width + x) as usize] = m.data[(sy * m.width + sx) as usize];
-        }
-    }
-    out
-}
+pub use super::image_file::{read_image, to_rgb8};
 
 /// Where the real images come from.
 #[derive(Clone, Debug)]

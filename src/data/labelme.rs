@@ -18,7 +18,6 @@ use serde_json::Map;
 use super::coco::{
     check_polygons, CocoAnnotation, CocoCategory, CocoDataset, CocoImage, Segmentation,
 };
-use super::polygon::rle_from_polygons;
 
 #[derive(Deserialize)]
 struct LabelmeFile {
@@ -45,6 +44,9 @@ fn default_shape_type() -> String {
     "polygon".into()
 }
 
+/// Most vertices of a circle's polygon (labelme's own count up to a radius of ~8.7e8 px).
+const MAX_CIRCLE_POINTS: f64 = 65536.0;
+
 /// Labels that mark regions, not objects (labelme's conventions).
 const NOT_CATEGORIES: [&str; 2] = ["__ignore__", "_background_"];
 
@@ -65,33 +67,55 @@ pub fn load_dir(dir: &Path, labels: Option<&[String]>) -> Result<CocoDataset> {
     for f in &files {
         let text = std::fs::read_to_string(f)
             .with_context(|| format!("cannot read LabelMe file {}", f.display()))?;
-        let lm: LabelmeFile = serde_json::from_str(&text)
-            .with_context(|| format!("invalid LabelMe JSON in {}", f.display()))?;
-        parsed.push(lm);
+        parsed.push(parse(&text).with_context(|| format!("in LabelMe file {}", f.display()))?);
     }
-    let names: Vec<String> = match labels {
-        Some(l) => l
-            .iter()
-            .filter(|n| !NOT_CATEGORIES.contains(&n.as_str()))
-            .cloned()
-            .collect(),
-        None => {
-            let mut n: Vec<String> = parsed
+    let names = match labels {
+        Some(l) => category_names(l.iter()),
+        None => category_names(
+            parsed
                 .iter()
-                .flat_map(|lm| lm.shapes.iter().map(|s| s.label.clone()))
-                .filter(|n| !NOT_CATEGORIES.contains(&n.as_str()))
-                .collect();
-            n.sort();
-            n.dedup();
-            n
-        }
+                .flat_map(|lm| lm.shapes.iter().map(|s| &s.label)),
+        ),
     };
-    let cat_of: HashMap<&str, u64> = names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| (n.as_str(), i as u64 + 1))
-        .collect();
-    let mut ds = CocoDataset {
+    let mut ds = dataset_with_categories(names, labels.is_none());
+    for (f, lm) in files.iter().zip(parsed) {
+        push_file(&mut ds, &lm, f, dir)?;
+    }
+    ds.validate()?;
+    Ok(ds)
+}
+
+/// Converts the text of one LabelMe file to COCO, its own labels (sorted) as the
+/// categories; `origin` names the file in errors and locates `imagePath` (the image is
+/// only checked when it exists). What the fuzz target `labelme_json` drives.
+pub fn from_json(text: &str, origin: &Path) -> Result<CocoDataset> {
+    let lm = parse(text).with_context(|| format!("in LabelMe file {}", origin.display()))?;
+    let names = category_names(lm.shapes.iter().map(|s| &s.label));
+    let mut ds = dataset_with_categories(names, true);
+    let dir = origin.parent().unwrap_or(Path::new("."));
+    push_file(&mut ds, &lm, origin, dir)?;
+    ds.validate()?;
+    Ok(ds)
+}
+
+fn parse(text: &str) -> Result<LabelmeFile> {
+    serde_json::from_str(text).context("invalid LabelMe JSON")
+}
+
+/// Category names without labelme's region labels; `sort` for labels found in files.
+fn category_names<'a>(labels: impl Iterator<Item = &'a String>) -> Vec<String> {
+    labels
+        .filter(|n| !NOT_CATEGORIES.contains(&n.as_str()))
+        .cloned()
+        .collect()
+}
+
+fn dataset_with_categories(mut names: Vec<String>, sort: bool) -> CocoDataset {
+    if sort {
+        names.sort();
+        names.dedup();
+    }
+    CocoDataset {
         categories: names
             .iter()
             .enumerate()
@@ -102,83 +126,95 @@ pub fn load_dir(dir: &Path, labels: Option<&[String]>) -> Result<CocoDataset> {
             })
             .collect(),
         ..Default::default()
-    };
-    for (f, lm) in files.iter().zip(parsed) {
-        let image_id = ds.images.len() as u64 + 1;
-        let json_dir = f.parent().unwrap_or(Path::new("."));
-        let image_file = json_dir.join(&lm.image_path);
-        let file_name = relative_to(&image_file, dir);
-        if let Ok((w, h)) = image::image_dimensions(&image_file) {
-            if (w, h) != (lm.image_width, lm.image_height) {
-                bail!(
-                    "{}: imageWidth×imageHeight {}×{} disagrees with {} ({}×{})",
-                    f.display(),
-                    lm.image_width,
-                    lm.image_height,
-                    image_file.display(),
-                    w,
-                    h
-                );
-            }
-        }
-        ds.images.push(CocoImage {
-            id: image_id,
-            file_name,
-            width: lm.image_width,
-            height: lm.image_height,
-            extra: Map::new(),
-        });
-        // Instances keyed by (label, group), in order of first appearance.
-        let mut order: Vec<(String, Option<i64>, usize)> = Vec::new();
-        let mut polys: Vec<Vec<Vec<f64>>> = Vec::new();
-        for (si, shape) in lm.shapes.iter().enumerate() {
-            let poly = shape_polygon(shape)
-                .with_context(|| format!("{}: shape {si} ({:?})", f.display(), shape.label))?;
-            let Some(poly) = poly else {
-                eprintln!(
-                    "warning: {}: shape {si} is a {:?}, which has no area; skipped",
-                    f.display(),
-                    shape.shape_type
-                );
-                continue;
-            };
-            let slot = match shape.group_id {
-                Some(g) => order
-                    .iter()
-                    .position(|(l, gg, _)| *l == shape.label && *gg == Some(g)),
-                None => None,
-            };
-            match slot {
-                Some(s) => polys[order[s].2].push(poly),
-                None => {
-                    order.push((shape.label.clone(), shape.group_id, polys.len()));
-                    polys.push(vec![poly]);
-                }
-            }
-        }
-        for (label, _, idx) in order {
-            let Some(&category_id) = cat_of.get(label.as_str()) else {
-                if !NOT_CATEGORIES.contains(&label.as_str()) {
-                    bail!("{}: label {label:?} is not in the labels list", f.display());
-                }
-                continue;
-            };
-            let parts = std::mem::take(&mut polys[idx]);
-            let rle = rle_from_polygons(&parts, lm.image_height, lm.image_width);
-            ds.annotations.push(CocoAnnotation {
-                id: ds.annotations.len() as u64 + 1,
-                image_id,
-                category_id,
-                area: rle.area() as f64,
-                bbox: rle.bbox(),
-                segmentation: Segmentation::Polygons(parts),
-                iscrowd: 0,
-                extra: Map::new(),
-            });
+    }
+}
+
+/// Appends the image of LabelMe file `f` (parsed as `lm`) and its instances to `ds`.
+fn push_file(ds: &mut CocoDataset, lm: &LabelmeFile, f: &Path, dir: &Path) -> Result<()> {
+    let cat_of: HashMap<&str, u64> = ds
+        .categories
+        .iter()
+        .map(|c| (c.name.as_str(), c.id))
+        .collect();
+    let image_id = ds.images.len() as u64 + 1;
+    let json_dir = f.parent().unwrap_or(Path::new("."));
+    let image_file = json_dir.join(&lm.image_path);
+    let file_name = relative_to(&image_file, dir);
+    if let Ok((w, h)) = super::image_file::image_dimensions(&image_file) {
+        if (w, h) != (lm.image_width, lm.image_height) {
+            bail!(
+                "{}: imageWidth×imageHeight {}×{} disagrees with {} ({}×{})",
+                f.display(),
+                lm.image_width,
+                lm.image_height,
+                image_file.display(),
+                w,
+                h
+            );
         }
     }
-    ds.validate()?;
-    Ok(ds)
+    let mut annotations = Vec::new();
+    // Instances keyed by (label, group), in order of first appearance.
+    let mut order: Vec<(String, Option<i64>, usize)> = Vec::new();
+    let mut polys: Vec<Vec<Vec<f64>>> = Vec::new();
+    for (si, shape) in lm.shapes.iter().enumerate() {
+        let poly = shape_polygon(shape)
+            .with_context(|| format!("{}: shape {si} ({:?})", f.display(), shape.label))?;
+        let Some(poly) = poly else {
+            eprintln!(
+                "warning: {}: shape {si} is a {:?}, which has no area; skipped",
+                f.display(),
+                shape.shape_type
+            );
+            continue;
+        };
+        let slot = match shape.group_id {
+            Some(g) => order
+                .iter()
+                .position(|(l, gg, _)| *l == shape.label && *gg == Some(g)),
+            None => None,
+        };
+        match slot {
+            Some(s) => polys[order[s].2].push(poly),
+            None => {
+                order.push((shape.label.clone(), shape.group_id, polys.len()));
+                polys.push(vec![poly]);
+            }
+        }
+    }
+    for (label, _, idx) in order {
+        let Some(&category_id) = cat_of.get(label.as_str()) else {
+            if !NOT_CATEGORIES.contains(&label.as_str()) {
+                bail!("{}: label {label:?} is not in the labels list", f.display());
+            }
+            continue;
+        };
+        let segmentation = Segmentation::Polygons(std::mem::take(&mut polys[idx]));
+        // The COCO checks, extent included: a vertex far off the image would make the
+        // rasteriser walk billions of points (found by the `labelme_json` fuzz target).
+        let rle = segmentation
+            .to_rle(lm.image_height, lm.image_width)
+            .with_context(|| format!("{}: instance {label:?}", f.display()))?;
+        annotations.push(CocoAnnotation {
+            id: (ds.annotations.len() + annotations.len()) as u64 + 1,
+            image_id,
+            category_id,
+            area: rle.area() as f64,
+            bbox: rle.bbox(),
+            segmentation,
+            iscrowd: 0,
+            extra: Map::new(),
+        });
+    }
+    ds.images.push(CocoImage {
+        id: image_id,
+        file_name,
+        width: lm.image_width,
+        height: lm.image_height,
+        extra: Map::new(),
+    });
+    ds.annotations.extend(annotations);
+    Ok(())
 }
 
 /// A shape's outline as a flat polygon; `None` for shapes without area (points, lines).
@@ -204,7 +240,10 @@ fn shape_polygon(s: &LabelmeShape) -> Result<Option<Vec<f64>>> {
             if r <= 0.0 {
                 bail!("circle has zero radius");
             }
-            let n = ((std::f64::consts::PI / (1.0 - 1.0 / r).acos()) as usize).max(12);
+            // labelme's vertex count, capped: it grows as π·sqrt(r/2) and is infinite once
+            // 1 − 1/r rounds to 1 (a huge radius from the `labelme_json` fuzz target).
+            let n = (std::f64::consts::PI / (1.0 - 1.0 / r).acos()).min(MAX_CIRCLE_POINTS);
+            let n = (n as usize).max(12);
             (0..n)
                 .flat_map(|i| {
                     let a = 2.0 * std::f64::consts::PI / n as f64 * i as f64;

@@ -61,3 +61,19 @@ impl Mask {
         }
     }
 }
+
+/// Resizes a mask with nearest-neighbour sampling (pixel centres).
+pub fn resize_mask(m: &Mask, width: u32, height: u32) -> Mask {
+    if m.width == width && m.height == height {
+        return m.clone();
+    }
+    let mut out = Mask::new(height, width);
+    for y in 0..height {
+        let sy = (((y as f64 + 0.5) * m.height as f64 / height as f64) as u32).min(m.height - 1);
+        for x in 0..width {
+            let sx = (((x as f64 + 0.5) * m.width as f64 / width as f64) as u32).min(m.width - 1);
+            out.data[(y * width + x) as usize] = m.data[(sy * m.width + sx) as usize];
+        }
+    }
+    out
+}

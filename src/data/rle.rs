@@ -266,7 +266,9 @@ fn decode_counts(s: &str) -> Result<Vec<u32>, RleError> {
             p += 1;
             k += 1;
             if !more && (c & 0x10) != 0 {
-                x |= -1i64 << (5 * k);
+                // Sign extension; past bit 63 there is nothing left to set (a plain `<<`
+                // overflows there: found by the `rle` fuzz target).
+                x |= (-1i64).checked_shl(5 * k).unwrap_or(0);
             }
         }
         let m = counts.len();

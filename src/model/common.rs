@@ -397,6 +397,15 @@ impl Sppf {
     /// - `x`: `[B, c_in, H, W]` → `[B, c_out, H, W]`
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let a = self.cv1.forward(x);
+        let [.., h, w] = a.dims();
+        if h == 1 && w == 1 {
+            // A padded max pool of a 1×1 map is the identity. Spelled out because
+            // burn-ndarray 0.22's SIMD max pool indexes out of bounds on 1×1 maps with
+            // ≥ 32 channels (a 32 px input on `--device ndarray` panicked).
+            return self
+                .cv2
+                .forward(Tensor::cat(vec![a.clone(), a.clone(), a.clone(), a], 1));
+        }
         let b = self.pool.forward(a.clone());
         let c = self.pool.forward(b.clone());
         let d = self.pool.forward(c.clone());

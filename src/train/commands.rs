@@ -109,7 +109,9 @@ pub fn eval_cmd(
     if ids.is_empty() {
         bail!("the {split:?} split of {origin} is empty");
     }
-    let model = ck.model("ema", &dev)?;
+    let model = ck
+        .model("ema", &dev)
+        .with_context(|| format!("in checkpoint {}", checkpoint.display()))?;
     let (stats, _): (Stats, _) = evaluate_ids(&model, &real, ids, &dev)?;
     if json_out {
         return Ok(
@@ -207,7 +209,9 @@ pub fn predict_cmd(
 ) -> Result<String> {
     let ck = Checkpoint::load(checkpoint)?;
     let dev = device_of(device.unwrap_or(ck.header.config.device));
-    let model = ck.model("ema", &dev)?;
+    let model = ck
+        .model("ema", &dev)
+        .with_context(|| format!("in checkpoint {}", checkpoint.display()))?;
     let size = ck.header.model.input_size() as u32;
     let files = list_images(input)?;
     std::fs::create_dir_all(out_dir)

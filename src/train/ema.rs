@@ -4,9 +4,9 @@
 //! follow the model closely. The EMA copy lives on the plain (non-autodiff) device in eval
 //! mode; it is what the trainer evaluates and saves in `best.bpk`.
 
-use std::collections::HashMap;
+use std::collections::VecDeque;
 
-use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::tensor::Tensor;
 
 /// Decay and ramp of ultralytics' `ModelEMA`.
@@ -18,29 +18,40 @@ pub struct Ema<M> {
     pub updates: u64,
 }
 
-struct Collect(HashMap<ParamId, Tensor<1>>);
+/// Every float tensor of a module, flattened, in visiting order.
+struct Collect(VecDeque<Tensor<1>>);
 
 impl ModuleVisitor for Collect {
     fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
         let t = param.val();
         let n = t.shape().num_elements();
-        self.0.insert(param.id, t.reshape([n]));
+        self.0.push_back(t.reshape([n]));
     }
 }
 
+/// Blends the collected tensors into a module of the same structure, matched by visiting
+/// order. Not by `ParamId`: a checkpoint restores the ids of weights but gives BatchNorm
+/// running statistics fresh ones, so after `--resume` an id match silently froze the
+/// EMA's running statistics (found by `tests/resume.rs`).
 struct Blend {
-    src: HashMap<ParamId, Tensor<1>>,
+    src: VecDeque<Tensor<1>>,
     d: f64,
 }
 
 impl ModuleMapper for Blend {
     fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-        let Some(s) = self.src.remove(&param.id) else {
-            return param;
-        };
+        let s = self
+            .src
+            .pop_front()
+            .expect("Ema: the model has fewer tensors than its EMA copy");
         let d = self.d;
         param.map(|e| {
             let dims = e.dims();
+            assert_eq!(
+                s.dims()[0],
+                dims.iter().product::<usize>(),
+                "Ema: model and EMA copy differ in structure"
+            );
             e.mul_scalar(d) + s.reshape(dims).mul_scalar(1.0 - d)
         })
     }
@@ -64,7 +75,7 @@ impl<M: Module> Ema<M> {
     pub fn update(&mut self, model: &M) {
         self.updates += 1;
         let d = Self::decay(self.updates);
-        let mut c = Collect(HashMap::new());
+        let mut c = Collect(VecDeque::new());
         model.valid().visit(&mut c);
         let m = self.model.clone();
         self.model = m.map(&mut Blend { src: c.0, d });

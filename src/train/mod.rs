@@ -7,6 +7,7 @@
 pub mod checkpoint;
 pub mod commands;
 pub mod detector;
+pub mod divergence;
 pub mod ema;
 pub mod evaluate;
 pub mod interrupt;

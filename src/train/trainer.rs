@@ -4,8 +4,9 @@
 //! Run directory (`runs/<name>/` or `--run-dir`): `config.toml` (resolved), `split.json`,
 //! `metrics.jsonl` (one object per epoch), `results.csv`, `best.bpk`, `last.bpk`,
 //! `test.json`, and `plots.png` when plotting is built in. Every file is written
-//! atomically. A non-finite loss stops the run with an error naming the epoch, step and
-//! loss term; `last.bpk` then still holds the last good epoch.
+//! atomically. A diverging run (non-finite or exploding loss, see [`super::divergence`])
+//! stops with an error naming the epoch, step and loss term; `last.bpk` then still holds
+//! the last good epoch.
 //!
 //! Batches are built on a loader thread (rendering, decoding and augmenting the next
 //! batch in parallel with rayon) while the current step runs; each item's augmentation
@@ -34,6 +35,7 @@ use crate::util::write_atomic;
 
 use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header, Stats, FORMAT};
 use super::detector::{Detector, DetectorConfig};
+use super::divergence::{check_weights, At, DivergenceGuard};
 use super::ema::Ema;
 use super::evaluate::evaluate_ids;
 use super::schedule::step_lr;
@@ -342,12 +344,13 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                     run_dir.join("last.bpk").display()
                 );
             }
-            let model = ck.model("model", &ad)?;
+            let in_last = || format!("--resume: in {}", run_dir.join("last.bpk").display());
+            let model = ck.model("model", &ad).with_context(in_last)?;
             let ema = Ema {
-                model: ck.model("ema", &base)?,
+                model: ck.model("ema", &base).with_context(in_last)?,
                 updates: ck.header.ema_updates,
             };
-            optim = ck.optimizer(optim)?;
+            optim = ck.optimizer(optim).with_context(in_last)?;
             let recs = read_metrics(&run_dir, ck.header.epoch)?;
             say(format!("resuming after epoch {}", ck.header.epoch));
             (model, ema, ck.header.epoch, ck.header.best_fitness, recs)
@@ -407,6 +410,8 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             .unwrap_or(0) as usize
     });
     let (mut train_imgs, mut train_secs) = (0usize, 0f64);
+    let guard_names: Vec<&str> = loss_names.iter().copied().chain(["total"]).collect();
+    let mut guard = DivergenceGuard::new(&guard_names);
     for epoch in start_epoch..cfg.train.epochs {
         let te = Instant::now();
         let plan = epoch_plan(&split.train, cfg.data.synthetic, cfg.seed, epoch);
@@ -446,33 +451,15 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 );
                 let mut v = loss.terms.clone();
                 v.push(loss.total_value);
-                let mut names = loss_names.to_vec();
-                names.push("total");
-                for (name, &val) in names.iter().zip(&v) {
-                    if !val.is_finite() {
-                        bail!(
-                            "non-finite loss at epoch {}, step {} of {}: {name} loss = {val} (all terms {} = {v:?}); {}",
-                            epoch + 1,
-                            step + 1,
-                            per_epoch,
-                            names.join("/"),
-                            if epoch > start_epoch || start_epoch > 0 {
-                                "last.bpk holds the last good epoch"
-                            } else {
-                                "no checkpoint was written yet"
-                            }
-                        );
-                    }
-                }
+                let at = At {
+                    epoch,
+                    step,
+                    per_epoch,
+                };
+                guard.check_step(at, &v)?;
                 let mut grads = GradientsParams::from_grads(loss.total.backward(), &model);
                 let norm = optim::clip_global_norm(&model, &mut grads, cfg.train.grad_clip)?;
-                if !norm.is_finite() {
-                    bail!(
-                        "non-finite gradient norm {norm} at epoch {}, step {}",
-                        epoch + 1,
-                        step + 1
-                    );
-                }
+                guard.check_grad_norm(at, norm)?;
                 let (rates, lr) = step_lr(&cfg.train, epoch, step, per_epoch);
                 model = optim.step(rates, model.clone(), grads);
                 if cfg.train.ema {
@@ -528,6 +515,10 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         }
         let t_train = te.elapsed().as_secs_f64();
         train_secs += t_train;
+        check_weights(&model.valid(), "model", epoch)?;
+        if cfg.train.ema {
+            check_weights(&ema.model, "EMA", epoch)?;
+        }
 
         // Evaluate.
         let eval_model: Detector = if cfg.train.ema {

@@ -43,9 +43,16 @@ pub fn box_iou(a: [f32; 4], b: [f32; 4]) -> f32 {
 }
 
 /// Greedy class-wise NMS. `cands` are `(xyxy, score, class)`; returns kept indices in
-/// descending score order (ties: lower index first), at most `max_det`.
+/// descending score order (ties: lower index first), at most `max_det`. Candidates with a
+/// NaN score or a non-finite coordinate (a diverged model's output) are never kept: they
+/// would rank first under `total_cmp` and reach results.json as `null`.
 pub fn nms(cands: &[([f32; 4], f32, usize)], iou: f32, max_det: usize) -> Vec<usize> {
-    let mut order: Vec<usize> = (0..cands.len()).collect();
+    if max_det == 0 {
+        return Vec::new();
+    }
+    let mut order: Vec<usize> = (0..cands.len())
+        .filter(|&i| !cands[i].1.is_nan() && cands[i].0.iter().all(|v| v.is_finite()))
+        .collect();
     order.sort_by(|&i, &j| cands[j].1.total_cmp(&cands[i].1).then(i.cmp(&j)));
     order.truncate(MAX_NMS);
     let shifted: Vec<[f32; 4]> = cands
