@@ -12,6 +12,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use chicktrain::train::checkpoint::Checkpoint;
+use chicktrain::train::detector::DetectorConfig;
 use common::*;
 use image::ImageEncoder;
 
@@ -411,7 +412,10 @@ fn broken_images_meshes_and_checkpoints_exit_2_naming_the_file() {
         header: ck.header.clone(),
         sections: ck.sections.clone(),
     };
-    other.header.model.num_classes = 3;
+    match &mut other.header.model {
+        DetectorConfig::Yolo(c) => c.num_classes = 3,
+        DetectorConfig::Maskrcnn(c) => c.num_classes = 3,
+    }
     other.header.category_ids = vec![1, 2, 3];
     other.header.class_names = vec!["a".into(), "b".into(), "c".into()];
     let three = d.join("three.bpk");
