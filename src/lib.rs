@@ -4,6 +4,7 @@
 //! Data flows one way: `render` → `data` → `model` → `train` → `eval`. The binary in
 //! `main.rs` only parses arguments; every command is a function here so tests can call it.
 
+pub mod bench;
 pub mod cli;
 pub mod config;
 pub mod data;
