@@ -205,17 +205,19 @@ pub fn ablation(o: &AblationOptions) -> Result<String> {
         let a = r.acc.as_ref().expect("recommend only picks rows with AP");
         let base = rows.iter().find(|r| r.label == "base");
         pre.push_str(&format!(
-            "\n\n**Recommended:** `{}` — the fastest variant within {AP_TOLERANCE} segm AP of the best: {:.1} ms median latency, segm AP {:.3}, bbox AP {:.3}",
-            r.label, r.m.latency_ms[0], a.segm[0], a.bbox[0]
+            "\n\n**Recommended:** `{}` — the fastest variant within {AP_TOLERANCE} segm AP of the best: {:.1} ms median latency, {:.2} GFLOPs, segm AP {:.3}, bbox AP {:.3}",
+            r.label, r.m.latency_ms[0], r.m.gflops, a.segm[0], a.bbox[0]
         ));
         if let Some(b) = base.filter(|b| b.label != r.label) {
             if let Some(ba) = &b.acc {
                 pre.push_str(&format!(
-                    " (base: {:.1} ms, segm AP {:.3}, bbox AP {:.3}; {:.2}× faster)",
+                    " (base: {:.1} ms, {:.2} GFLOPs, segm AP {:.3}, bbox AP {:.3}; latency ×{:.2} and GFLOPs ×{:.2} of the base)",
                     b.m.latency_ms[0],
+                    b.m.gflops,
                     ba.segm[0],
                     ba.bbox[0],
-                    b.m.latency_ms[0] / r.m.latency_ms[0]
+                    r.m.latency_ms[0] / b.m.latency_ms[0],
+                    r.m.gflops / b.m.gflops
                 ));
             }
         }

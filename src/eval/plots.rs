@@ -172,7 +172,13 @@ where
     DB::ErrorType: 'static,
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing {:?}: {e:?}", p.title);
-    let xr = fit(p.series.iter().flat_map(|s| s.points.iter().map(|q| q.0)));
+    // Tagged points (scatter plots): room on the right for the tags, and the legend in
+    // the upper left, which an AP-vs-cost cloud rising to the right leaves free.
+    let tagged = p.series.iter().any(|s| !s.tags.is_empty());
+    let mut xr = fit(p.series.iter().flat_map(|s| s.points.iter().map(|q| q.0)));
+    if tagged {
+        xr.1 += (xr.1 - xr.0) * 0.2;
+    }
     let yr = p.y_range.unwrap_or_else(|| {
         fit(p.series.iter().flat_map(|s| {
             s.points.iter().enumerate().flat_map(|(i, q)| {
@@ -246,7 +252,11 @@ where
     if p.series.iter().any(|s| !s.label.is_empty()) {
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
+            .position(if tagged {
+                SeriesLabelPosition::UpperLeft
+            } else {
+                SeriesLabelPosition::LowerRight
+            })
             .label_font((FAMILY, 12))
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK.mix(0.3))
