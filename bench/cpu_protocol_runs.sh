@@ -23,3 +23,9 @@ sweep 0,50,100,200
 "$CT" sweep --config configs/cpu_protocol.toml --seeds 1 --syn 0 --set train.epochs=78 \
   --out runs/sweep/cpu_protocol_real_78ep --quiet
 sweep 0,50,100,150,200
+# Copy the small report files that BENCHMARKS.md shows.
+R=bench/results/sweep_cpu_protocol
+mkdir -p $R
+cp $SWEEP/sweep.md $SWEEP/sweep.csv $SWEEP/sweep.png $SWEEP/runs.csv $R/
+cp runs/sweep/cpu_protocol_real_78ep/sweep.md $R/real_78ep.md
+cp $SWEEP/syn200_seed0/plots.png $R/syn200_run_plots.png

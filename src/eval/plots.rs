@@ -155,7 +155,7 @@ fn fit(values: impl Iterator<Item = f64>) -> (f64, f64) {
 /// A tick label with as many decimals as the axis span needs.
 fn tick(v: f64, (lo, hi): (f64, f64)) -> String {
     let span = (hi - lo).abs();
-    let d = if span >= 20.0 {
+    let d = if span >= 10.0 {
         0
     } else if span >= 2.0 {
         1
