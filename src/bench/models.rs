@@ -725,6 +725,25 @@ pub fn parse_sizes(s: &str) -> Result<Vec<usize>> {
         .collect()
 }
 
+fn preamble(o: &BenchOptions, done: usize, total: usize, t0: Instant) -> String {
+    let e = o.effort;
+    format!(
+        "# Model bench\n\n{done} of {total} rows on {} ({} threads available), device {:?}; \
+         latency: batch 1, {} warm-up + {} timed runs (median, p10, p90); training: batch \
+         {}, 1 warm-up + {} timed steps (median); peak memory: RSS high-water mark of a fresh \
+         process per row. AP: test split of each checkpoint (`chicktrain eval --split test`). \
+         Took {:.0} s.",
+        std::env::consts::ARCH,
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        o.device,
+        e.warmup,
+        e.repeats,
+        e.train_batch,
+        e.train_steps,
+        t0.elapsed().as_secs_f64()
+    )
+}
+
 /// `chicktrain bench models`.
 pub fn bench_models(o: &BenchOptions, quiet: bool) -> Result<String> {
     if o.variants.is_empty() || (o.sizes.is_empty() && o.checkpoints.is_empty()) {
@@ -758,6 +777,8 @@ pub fn bench_models(o: &BenchOptions, quiet: bool) -> Result<String> {
                 m,
                 acc: None,
             });
+            // Rewritten after every row, so a stopped bench keeps what it measured.
+            write_report(&o.out, &rows, &preamble(o, rows.len(), total, t0))?;
         }
     }
     for (ck, model) in cks {
@@ -771,25 +792,9 @@ pub fn bench_models(o: &BenchOptions, quiet: bool) -> Result<String> {
             m,
             acc: Some(acc),
         });
+        write_report(&o.out, &rows, &preamble(o, rows.len(), total, t0))?;
     }
-    let e = o.effort;
-    let preamble = format!(
-        "# Model bench\n\n{} variant/size rows on {} ({} threads available), device {:?}; \
-         latency: batch 1, {} warm-up + {} timed runs (median, p10, p90); training: batch \
-         {}, 1 warm-up + {} timed steps (median); peak memory: RSS high-water mark of a fresh \
-         process per row. AP: test split of each checkpoint (`chicktrain eval --split test`). \
-         Took {:.0} s.",
-        rows.len(),
-        std::env::consts::ARCH,
-        std::thread::available_parallelism().map_or(0, |n| n.get()),
-        o.device,
-        e.warmup,
-        e.repeats,
-        e.train_batch,
-        e.train_steps,
-        t0.elapsed().as_secs_f64()
-    );
-    write_report(&o.out, &rows, &preamble)?;
+    write_report(&o.out, &rows, &preamble(o, rows.len(), total, t0))?;
     let md = std::fs::read_to_string(o.out.join("bench.md"))?;
     Ok(format!(
         "{md}\nwrote bench.csv, bench.md and plots in {}",
