@@ -1,6 +1,6 @@
 #!/bin/sh
 # The AP-producing trainings behind BENCHMARKS.md, run one after another on the shared
-# 2-core dev box (about 1.5 h there; the finished steps are read back, not redone): the CPU-protocol sweep (configs/cpu_protocol.toml;
+# 2-core dev box (about 1.2 h there, under load; finished steps are read back, not redone): the CPU-protocol sweep (configs/cpu_protocol.toml;
 # 1 seed; 0/50/100/150/200 synthetic = the paper's 0/250/…/1000 per 60 real, scaled to 12
 # real training images) and the scene ablation trainings (cpu_protocol + 50 synthetic,
 # one model option changed per variant). Training is deterministic, so the AP numbers do

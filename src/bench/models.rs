@@ -610,7 +610,7 @@ pub fn write_report(out: &Path, rows: &[Row], preamble: &str) -> Result<()> {
             ));
             panels.push(
                 Panel::new(
-                    format!("test {kind} AP vs batch-1 latency"),
+                    format!("test {kind} AP vs batch-1 latency (line: Pareto front)"),
                     "latency (ms, median)",
                     &format!("{kind} AP"),
                 )

@@ -172,8 +172,7 @@ where
     DB::ErrorType: 'static,
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing {:?}: {e:?}", p.title);
-    // Tagged points (scatter plots): room on the right for the tags, and the legend in
-    // the upper left, which an AP-vs-cost cloud rising to the right leaves free.
+    // Tagged points (scatter plots): room on the right for the tags.
     let tagged = p.series.iter().any(|s| !s.tags.is_empty());
     let mut xr = fit(p.series.iter().flat_map(|s| s.points.iter().map(|q| q.0)));
     if tagged {
@@ -249,14 +248,11 @@ where
             }
         }
     }
-    if p.series.iter().any(|s| !s.label.is_empty()) {
+    // Tagged scatter plots name their points; a legend box would cover some of them.
+    if !tagged && p.series.iter().any(|s| !s.label.is_empty()) {
         chart
             .configure_series_labels()
-            .position(if tagged {
-                SeriesLabelPosition::UpperLeft
-            } else {
-                SeriesLabelPosition::LowerRight
-            })
+            .position(SeriesLabelPosition::LowerRight)
             .label_font((FAMILY, 12))
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK.mix(0.3))
