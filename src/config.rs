@@ -13,6 +13,10 @@ use serde::{Deserialize, Serialize};
 /// The configs shipped in `configs/`, embedded so `--config NAME.toml` works anywhere.
 pub const SHIPPED: &[(&str, &str)] = &[
     (
+        "cpu_protocol.toml",
+        include_str!("../configs/cpu_protocol.toml"),
+    ),
+    (
         "quickstart.toml",
         include_str!("../configs/quickstart.toml"),
     ),

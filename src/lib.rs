@@ -8,6 +8,8 @@
 //! side of [`data`]. Without it (`default-features = false`) the crate is the data layer,
 //! renderer and evaluator, which the fuzz targets in `fuzz/` build.
 
+#[cfg(feature = "train")]
+pub mod bench;
 pub mod cli;
 pub mod config;
 pub mod data;

@@ -128,7 +128,8 @@ enum Command {
         #[arg(long)]
         carcass: Option<PathBuf>,
     },
-    /// Measure speed: `bench coco` times the COCO evaluator on a GT/DT pair.
+    /// Measure speed: `bench models` (model variants × sizes), `bench ablation` (what the
+    /// scene needs), `bench coco` (the COCO evaluator), `bench render` (the renderer).
     Bench {
         #[command(subcommand)]
         what: BenchWhat,
@@ -148,6 +149,33 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// The paper's experiment: train a config with each synthetic-image count and several
+    /// seeds, score each run on its test split, and report mean ± std (runs/sweep/<name>/).
+    Sweep {
+        /// Config file or shipped config name (e.g. yolo_real_baseline.toml).
+        #[arg(long)]
+        config: String,
+        /// Synthetic-image counts, comma-separated.
+        #[arg(long, default_value = "0,250,500,750,1000")]
+        syn: String,
+        /// Seeds per count (config seed, seed + 1, …).
+        #[arg(long, default_value_t = 1)]
+        seeds: usize,
+        /// Override a config key in every run, e.g. --set train.epochs=20 (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Shrink every run to a ~1 minute smoke run.
+        #[arg(long)]
+        smoke: bool,
+        /// Write the runs and the report here instead of runs/sweep/<name>/.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[arg(long, value_enum)]
+        device: Option<DeviceArg>,
+        /// No progress bars or per-epoch lines.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Convert between annotation formats.
     Convert {
         #[command(subcommand)]
@@ -155,8 +183,112 @@ enum Command {
     },
 }
 
+/// How much `bench models` / `bench ablation` measure per row (unset: the defaults of
+/// [`chicktrain::bench::models::Effort`], or of `--quick`).
+#[derive(Args, Clone, Copy)]
+struct EffortArgs {
+    /// Untimed batch-1 runs before the timed ones [default: 3].
+    #[arg(long)]
+    warmup: Option<usize>,
+    /// Timed batch-1 inference runs; median, p10, p90 reported [default: 30].
+    #[arg(long)]
+    repeats: Option<usize>,
+    /// Training batch size of the throughput column [default: 8].
+    #[arg(long)]
+    train_batch: Option<usize>,
+    /// Timed training steps, after one warm-up step [default: 3].
+    #[arg(long)]
+    train_steps: Option<usize>,
+}
+
+impl EffortArgs {
+    fn over(self, base: chicktrain::bench::models::Effort) -> chicktrain::bench::models::Effort {
+        chicktrain::bench::models::Effort {
+            warmup: self.warmup.unwrap_or(base.warmup),
+            repeats: self.repeats.unwrap_or(base.repeats),
+            train_batch: self.train_batch.unwrap_or(base.train_batch),
+            train_steps: self.train_steps.unwrap_or(base.train_steps),
+        }
+    }
+}
+
+fn this_exe() -> anyhow::Result<PathBuf> {
+    std::env::current_exe().map_err(|e| anyhow::anyhow!("cannot locate this binary: {e}"))
+}
+
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// Model variants × input sizes: parameters, GFLOPs, batch-1 latency, training
+    /// images/s, peak memory (a fresh process per row), and test AP of --checkpoints.
+    Models {
+        /// Comma-separated variants: yolo-n, yolo-s, suffixes -p45 -nopsa -w<f> -m<k>;
+        /// mrcnn-r18/r34/r50/r101 (default: all scene options and depths).
+        #[arg(long)]
+        variants: Option<String>,
+        /// Comma-separated input sizes (default 256,320,416,512,640).
+        #[arg(long)]
+        sizes: Option<String>,
+        /// Trained checkpoints (best.bpk) to score on their test split and time.
+        #[arg(long, num_args = 1..)]
+        checkpoints: Vec<PathBuf>,
+        /// A couple of minutes: 3 variants, 256 and 320 px, 5 repeats, 1 training step
+        /// (--variants / --sizes still override).
+        #[arg(long)]
+        quick: bool,
+        /// Report folder name under runs/bench/ (default: models, or quick).
+        #[arg(long)]
+        name: Option<String>,
+        /// Report folder (overrides --name).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[command(flatten)]
+        effort: EffortArgs,
+        #[arg(long, value_enum, default_value = "flex")]
+        device: DeviceArg,
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Scene ablation: train one variant per dropped/shrunk model option, report test AP
+    /// vs latency and a recommended default (runs/ablation/<config name>/).
+    Ablation {
+        #[arg(long, default_value = "cpu_protocol.toml")]
+        config: String,
+        /// Synthetic images added to the real training set of every variant.
+        #[arg(long, default_value_t = 50)]
+        syn: usize,
+        /// Override a config key in every variant (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Comma-separated subset of: base, no_p3, no_c2psa, width_0.5, protos_16, px192, px320.
+        #[arg(long)]
+        variants: Option<String>,
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Only train the missing runs (no timing).
+        #[arg(long)]
+        train_only: bool,
+        /// Never train: time every variant; AP where a finished run exists.
+        #[arg(long)]
+        no_train: bool,
+        #[command(flatten)]
+        effort: EffortArgs,
+        #[arg(long, value_enum, default_value = "flex")]
+        device: DeviceArg,
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// One (variant, size) measurement as a JSON line (what `bench models` runs per row).
+    #[command(hide = true)]
+    ModelWorker {
+        #[arg(long)]
+        variant: String,
+        #[arg(long)]
+        size: usize,
+        #[command(flatten)]
+        effort: EffortArgs,
+        #[arg(long, value_enum, default_value = "flex")]
+        device: DeviceArg,
+    },
     /// Renderer speed: images/s with shadows and masks, and where the time goes.
     Render {
         #[arg(long, default_value_t = 640)]
@@ -240,6 +372,86 @@ fn run(cli: Cli) -> anyhow::Result<String> {
                 preset,
                 seed,
             } => cli::bench_render(size, images, &preset, seed),
+            BenchWhat::Models {
+                variants,
+                sizes,
+                checkpoints,
+                quick,
+                name,
+                out,
+                effort,
+                device,
+                quiet,
+            } => {
+                use chicktrain::bench::models as bm;
+                let mut o = bm::BenchOptions {
+                    variants: bm::default_variants(),
+                    sizes: bm::DEFAULT_SIZES.to_vec(),
+                    effort: bm::Effort::default(),
+                    checkpoints,
+                    out: PathBuf::new(),
+                    device: device.into(),
+                    exe: this_exe()?,
+                };
+                if quick {
+                    bm::quick(&mut o);
+                }
+                o.effort = effort.over(o.effort);
+                if let Some(v) = variants {
+                    o.variants = v
+                        .split(',')
+                        .map(|s| s.trim().parse())
+                        .collect::<anyhow::Result<_>>()?;
+                }
+                if let Some(s) = sizes {
+                    o.sizes = bm::parse_sizes(&s)?;
+                }
+                let name = name.unwrap_or_else(|| if quick { "quick" } else { "models" }.into());
+                o.out = out.unwrap_or_else(|| PathBuf::from("runs/bench").join(name));
+                bm::bench_models(&o, quiet)
+            }
+            BenchWhat::Ablation {
+                config,
+                syn,
+                set,
+                variants,
+                out,
+                train_only,
+                no_train,
+                effort,
+                device,
+                quiet,
+            } => {
+                let name = chicktrain::config::load(&config, &set)?.name;
+                chicktrain::bench::ablation::ablation(
+                    &chicktrain::bench::ablation::AblationOptions {
+                        config,
+                        synthetic: syn,
+                        overrides: set,
+                        only: variants
+                            .map(|v| v.split(',').map(|s| s.trim().to_string()).collect())
+                            .unwrap_or_default(),
+                        out: out.unwrap_or_else(|| PathBuf::from("runs/ablation").join(name)),
+                        train_only,
+                        no_train,
+                        effort: effort.over(Default::default()),
+                        device: device.into(),
+                        exe: this_exe()?,
+                        quiet,
+                    },
+                )
+            }
+            BenchWhat::ModelWorker {
+                variant,
+                size,
+                effort,
+                device,
+            } => chicktrain::bench::models::worker(
+                &variant,
+                size,
+                effort.over(Default::default()),
+                device.into(),
+            ),
         },
         Some(Command::CocoEval {
             gt,
@@ -247,6 +459,25 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             iou_type,
             json,
         }) => cli::coco_eval(&gt, &dt, iou_type, json),
+        Some(Command::Sweep {
+            config,
+            syn,
+            seeds,
+            set,
+            smoke,
+            out,
+            device,
+            quiet,
+        }) => chicktrain::bench::sweep::sweep(&chicktrain::bench::sweep::SweepOptions {
+            config,
+            synthetic: chicktrain::bench::sweep::parse_counts(&syn)?,
+            seeds,
+            overrides: set,
+            smoke,
+            out,
+            device: device.map(Into::into),
+            quiet,
+        }),
         Some(Command::Convert { what }) => match what {
             ConvertWhat::Labelme { dir, out, labels } => {
                 cli::convert_labelme(&dir, labels.as_deref(), &out)

@@ -1,5 +1,8 @@
-//! Evaluation: the pycocotools-exact COCO evaluator and what reports it.
+//! Evaluation: the pycocotools-exact COCO evaluator and what reports it — tables
+//! ([`report`]: CSV and markdown) and charts ([`plots`]: PNG panels with text).
 
 pub mod coco_eval;
+pub mod plots;
+pub mod report;
 
 pub use coco_eval::{evaluate, CocoEvalResult, IouType, STAT_NAMES};

@@ -1,124 +1,88 @@
-//! `plots.png`: per-epoch curves drawn with the `image` crate alone (no font, no plotting
-//! dependency). Left panel: the training losses, each scaled to its own maximum, in the
-//! model's loss order (YOLO: box red, cls green, dfl blue, seg orange; Mask R-CNN: rpn_cls,
-//! rpn_box, cls, box, mask in red, green, blue, orange, purple). Right panel: validation AP (0–1 axis) —
-//! bbox AP dark blue, bbox AP50 light blue, segm AP dark red, segm AP50 light red.
-//! Grid lines every 0.25 of the axis. The numbers themselves are in `results.csv`.
+//! `plots.png` of a run: two panels drawn with [`crate::eval::plots`]. Left, the model's
+//! training losses per epoch (mean per step; YOLO: box, cls, dfl, seg; Mask R-CNN:
+//! rpn_cls, rpn_box, cls, box, mask); right, validation
+//! bbox/segm AP and AP50 per epoch on a 0–1 axis. The numbers are in `results.csv`.
 
 use std::path::Path;
 
 use anyhow::Result;
-use image::{Rgb, RgbImage};
 
-const W: u32 = 400;
-const H: u32 = 300;
-const PAD: u32 = 20;
+use crate::eval::plots::{write_png, Panel, Series, PALETTE};
 
-fn line(img: &mut RgbImage, (x0, y0): (f64, f64), (x1, y1): (f64, f64), c: Rgb<u8>) {
-    let n = ((x1 - x0).abs().max((y1 - y0).abs()).ceil() as usize).max(1);
-    for i in 0..=n {
-        let t = i as f64 / n as f64;
-        let (x, y) = (x0 + (x1 - x0) * t, y0 + (y1 - y0) * t);
-        for (dx, dy) in [(0i64, 0i64), (1, 0), (0, 1)] {
-            let (px, py) = (x as i64 + dx, y as i64 + dy);
-            if px >= 0 && py >= 0 && (px as u32) < img.width() && (py as u32) < img.height() {
-                img.put_pixel(px as u32, py as u32, c);
-            }
-        }
+/// The panels of a run's plot from its per-epoch metric records.
+pub fn run_panels(records: &[serde_json::Value], loss_names: &[&str]) -> [Panel; 2] {
+    let curve = |f: &dyn Fn(&serde_json::Value) -> Option<f64>| -> Vec<(f64, f64)> {
+        records
+            .iter()
+            .filter_map(|r| Some((r["epoch"].as_f64()?, f(r)?)))
+            .collect()
+    };
+    let mut losses = Panel::new("training losses", "epoch", "loss (mean per step)");
+    for (i, &k) in loss_names.iter().enumerate() {
+        losses = losses.push(Series::new(
+            k,
+            curve(&|r| r["loss"][k].as_f64()),
+            PALETTE[i % 6],
+        ));
     }
+    let mut ap = Panel::new("validation", "epoch", "COCO AP").y_range(0.0, 1.0);
+    for (i, (t, s, name)) in [
+        ("bbox", 0, "bbox AP"),
+        ("bbox", 1, "bbox AP50"),
+        ("segm", 0, "segm AP"),
+        ("segm", 1, "segm AP50"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        ap = ap.push(Series::new(
+            name,
+            curve(&|r| r["val"][t]["stats"][s].as_f64()),
+            PALETTE[6 + i],
+        ));
+    }
+    [losses, ap]
 }
-
-fn panel(img: &mut RgbImage, ox: u32, series: &[(Vec<f64>, Rgb<u8>)], normalise: bool) {
-    let (x0, x1) = ((ox + PAD) as f64, (ox + W - PAD) as f64);
-    let (y0, y1) = ((H - PAD) as f64, PAD as f64);
-    for k in 0..=4 {
-        let y = y0 + (y1 - y0) * k as f64 / 4.0;
-        line(img, (x0, y), (x1, y), Rgb([225, 225, 225]));
-    }
-    line(img, (x0, y0), (x1, y0), Rgb([0, 0, 0]));
-    line(img, (x0, y0), (x0, y1), Rgb([0, 0, 0]));
-    for (vals, c) in series {
-        let max = if normalise {
-            vals.iter()
-                .cloned()
-                .filter(|v| v.is_finite())
-                .fold(0.0, f64::max)
-                .max(1e-12)
-        } else {
-            1.0
-        };
-        let n = vals.len();
-        let at = |i: usize| {
-            let x = if n > 1 {
-                x0 + (x1 - x0) * i as f64 / (n - 1) as f64
-            } else {
-                x0
-            };
-            let v = (vals[i] / max).clamp(0.0, 1.0);
-            (x, y0 + (y1 - y0) * v)
-        };
-        if n == 1 {
-            line(img, at(0), (at(0).0 + 3.0, at(0).1), *c);
-        }
-        for i in 1..n {
-            line(img, at(i - 1), at(i), *c);
-        }
-    }
-}
-
-/// Colours of the loss curves, in loss order.
-const LOSS_COLOURS: [[u8; 3]; 6] = [
-    [220, 40, 40],
-    [40, 160, 40],
-    [40, 40, 220],
-    [240, 150, 0],
-    [150, 40, 180],
-    [90, 90, 90],
-];
 
 /// Writes `<dir>/plots.png` from the per-epoch metric records (`loss.<name>` for each of
 /// `loss_names`).
 pub fn write_plots(dir: &Path, records: &[serde_json::Value], loss_names: &[&str]) -> Result<()> {
-    let get = |f: &dyn Fn(&serde_json::Value) -> Option<f64>| -> Vec<f64> {
-        records.iter().map(|r| f(r).unwrap_or(0.0)).collect()
-    };
-    let loss = |k: &str| get(&|r: &serde_json::Value| r["loss"][k].as_f64());
-    let stat = |t: &'static str, i: usize| get(&move |r| r["val"][t]["stats"][i].as_f64());
-    let mut img = RgbImage::from_pixel(2 * W, H, Rgb([255, 255, 255]));
-    panel(
-        &mut img,
-        0,
-        &loss_names
-            .iter()
-            .zip(LOSS_COLOURS.iter().cycle())
-            .map(|(k, c)| (loss(k), Rgb(*c)))
-            .collect::<Vec<_>>(),
-        true,
-    );
-    panel(
-        &mut img,
-        W,
-        &[
-            (stat("bbox", 0), Rgb([20, 40, 140])),
-            (stat("bbox", 1), Rgb([110, 160, 240])),
-            (stat("segm", 0), Rgb([150, 20, 20])),
-            (stat("segm", 1), Rgb([240, 120, 120])),
-        ],
-        false,
-    );
-    let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new_with_quality(
-        &mut png,
-        image::codecs::png::CompressionType::Fast,
-        image::codecs::png::FilterType::Adaptive,
+    write_png(
+        &dir.join("plots.png"),
+        &run_panels(records, loss_names),
+        2,
+        420,
+        300,
     )
-    .write_image(
-        img.as_raw(),
-        img.width(),
-        img.height(),
-        image::ExtendedColorType::Rgb8,
-    )?;
-    crate::util::write_atomic(&dir.join("plots.png"), &png)
 }
 
-use image::ImageEncoder;
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_plot_has_every_curve() {
+        let recs: Vec<serde_json::Value> = (1..=3)
+            .map(|e| {
+                serde_json::json!({"epoch": e, "loss": {"box": 1.0 / e as f64, "cls": 2.0, "dfl": 1.5, "seg": 3.0},
+                    "val": {"bbox": {"stats": [0.1 * e as f64, 0.2, 0.0]}, "segm": {"stats": [0.05, 0.1, 0.0]}}})
+            })
+            .collect();
+        let names = ["box", "cls", "dfl", "seg"];
+        let [l, a] = run_panels(&recs, &names);
+        assert_eq!(l.series.len(), 4);
+        assert_eq!(a.series.len(), 4);
+        assert!(l
+            .series
+            .iter()
+            .chain(&a.series)
+            .all(|s| s.points.len() == 3));
+        assert_eq!(a.series[0].points[2], (3.0, 0.30000000000000004));
+        let dir = std::env::temp_dir().join(format!("ct-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        write_plots(&dir, &recs, &names).unwrap();
+        let img = image::open(dir.join("plots.png")).unwrap();
+        assert_eq!((img.width(), img.height()), (840, 300));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,210 @@
+//! `chicktrain bench models`, `bench ablation` and `sweep` end to end on tiny selections
+//! (seconds each): the report files, their columns, resumption, and clean errors.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn run(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_chicktrain"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ct-bench-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn ok(out: &Output) -> String {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "failed: {err}");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn assert_clean_error(out: &Output, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert!(err.contains(needle), "{err:?} should mention {needle:?}");
+}
+
+#[test]
+fn bench_models_quick_writes_table_and_plot() {
+    let d = tmp("models");
+    let out = d.join("report");
+    let text = ok(&run(&[
+        "bench",
+        "models",
+        "--quick",
+        "--variants",
+        "yolo-n-p45-w0.25-m4",
+        "--sizes",
+        "64",
+        "--warmup",
+        "0",
+        "--repeats",
+        "3",
+        "--train-batch",
+        "2",
+        "--train-steps",
+        "1",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    assert!(text.contains("yolo-n-p45-w0.25-m4"), "{text}");
+    let csv = std::fs::read_to_string(out.join("bench.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 2, "{csv}");
+    let header: Vec<&str> = lines[0].split(',').collect();
+    assert_eq!(header, chicktrain::bench::models::COLUMNS);
+    let row: Vec<&str> = lines[1].split(',').collect();
+    assert_eq!(row.len(), header.len());
+    assert_eq!((row[0], row[1]), ("yolo-n-p45-w0.25-m4", "64"));
+    for col in [
+        "params_M",
+        "GFLOPs",
+        "latency_ms_median",
+        "train_img_s",
+        "train_peak_MiB",
+    ] {
+        let i = header.iter().position(|h| *h == col).unwrap();
+        let v: f64 = row[i]
+            .parse()
+            .unwrap_or_else(|_| panic!("{col} = {:?}", row[i]));
+        assert!(v > 0.0, "{col} = {v}");
+    }
+    // No checkpoints: the AP columns stay empty and no AP plots are written.
+    let ap = header.iter().position(|h| *h == "segm_AP").unwrap();
+    assert_eq!(row[ap], "");
+    assert!(std::fs::read_to_string(out.join("bench.md"))
+        .unwrap()
+        .contains("| yolo-n-p45-w0.25-m4 | 64 |"));
+    assert!(image::open(out.join("speed.png")).is_ok());
+    assert!(!out.join("ap_vs_latency.png").exists());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn bench_models_rejects_bad_variants_and_sizes() {
+    assert_clean_error(&run(&["bench", "models", "--variants", "yolo-x"]), "yolo-x");
+    assert_clean_error(&run(&["bench", "models", "--sizes", "100"]), "100");
+    assert_clean_error(
+        &run(&[
+            "bench",
+            "models",
+            "--checkpoints",
+            "/no/such/best.bpk",
+            "--sizes",
+            "64",
+            "--variants",
+            "yolo-n",
+        ]),
+        "/no/such/best.bpk",
+    );
+}
+
+#[test]
+fn ablation_times_untrained_variants_without_training() {
+    let d = tmp("ablation");
+    let text = ok(&run(&[
+        "bench",
+        "ablation",
+        "--variants",
+        "base,no_p3",
+        "--set",
+        "data.image_size=64",
+        "--set",
+        "data.crop=64",
+        "--no-train",
+        "--warmup",
+        "0",
+        "--repeats",
+        "2",
+        "--train-batch",
+        "2",
+        "--train-steps",
+        "1",
+        "--quiet",
+        "--out",
+        d.to_str().unwrap(),
+    ]));
+    assert!(
+        text.contains("| base | 64 |") && text.contains("| no_p3 | 64 |"),
+        "{text}"
+    );
+    assert!(!d.join("base").exists(), "--no-train must not train");
+    assert_clean_error(
+        &run(&[
+            "bench",
+            "ablation",
+            "--variants",
+            "base,bogus",
+            "--out",
+            d.to_str().unwrap(),
+        ]),
+        "bogus",
+    );
+    assert_clean_error(
+        &run(&[
+            "bench",
+            "ablation",
+            "--train-only",
+            "--no-train",
+            "--out",
+            d.to_str().unwrap(),
+        ]),
+        "exclude",
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn smoke_sweep_reports_two_settings_and_resumes() {
+    let d = tmp("sweep");
+    let out = d.join("sweep");
+    let cache = format!("data.cache={:?}", d.join("cache").display().to_string());
+    let args = [
+        "sweep",
+        "--config",
+        "quickstart.toml",
+        "--syn",
+        "0,2",
+        "--seeds",
+        "1",
+        "--smoke",
+        "--set",
+        &cache,
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let text = ok(&run(&[&args[..], &["--quiet"]].concat()));
+    assert!(text.contains("| Real baseline | 1 |"), "{text}");
+    assert!(text.contains("| Real + 2 syn | 1 |"), "{text}");
+    for f in ["sweep.md", "sweep.csv", "runs.csv", "sweep.png"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    assert!(out.join("syn2_seed0/test.json").exists());
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert!(csv.starts_with("synthetic,runs,train_minutes,bbox_AP_mean,bbox_AP_std"));
+    assert!(csv.lines().nth(2).unwrap().starts_with("2,1,"));
+    // Rerun: both settings are read back, not retrained, and the report is the same.
+    let again = run(&args);
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{err}");
+    assert_eq!(err.matches("done, reading it").count(), 2, "{err}");
+    assert_eq!(std::fs::read_to_string(out.join("sweep.csv")).unwrap(), csv);
+    assert_clean_error(
+        &run(&["sweep", "--config", "quickstart.toml", "--syn", "0,abc"]),
+        "abc",
+    );
+    assert_clean_error(
+        &run(&["sweep", "--config", "quickstart.toml", "--seeds", "0"]),
+        "--seeds 0",
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
