@@ -534,13 +534,13 @@ fn broken_images_meshes_and_checkpoints_exit_2_naming_the_file() {
         "resume: config model differs",
         &bytes,
         &["model.scale=\"s\""],
-        &["--resume", "differs from the config"],
+        &["--resume", "last.bpk", "differs from the config"],
     ));
     cases.push(resume(
         "resume: checkpoint of another class count",
         &std::fs::read(&three).unwrap(),
         &[],
-        &["--resume", "differs from the config"],
+        &["--resume", "last.bpk", "it has 3 classes, the data has 1"],
     ));
 
     eprintln!("{} cases", cases.len());
