@@ -1,22 +1,10 @@
 //! `chicktrain bench models`, `bench ablation` and `sweep` end to end on tiny selections
 //! (seconds each): the report files, their columns, resumption, and clean errors.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_chicktrain"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("ct-bench-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+mod common;
+use common::{run, tmp};
 
 fn ok(out: &Output) -> String {
     let err = String::from_utf8_lossy(&out.stderr);
@@ -25,10 +13,7 @@ fn ok(out: &Output) -> String {
 }
 
 fn assert_clean_error(out: &Output, needle: &str) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "stderr: {err}");
-    assert!(!err.contains("panicked"), "panic: {err}");
-    assert!(err.contains(needle), "{err:?} should mention {needle:?}");
+    common::assert_clean_error(out, &[needle]);
 }
 
 #[test]
