@@ -18,6 +18,10 @@ use crate::config::{ScheduleKind, TrainConfig};
 /// (ultralytics' bias group, `"bias" in name`).
 pub const BIAS: &str = r"(^|\.)(bias|beta)$";
 
+/// [`BIAS`] compiled once: [`step_lr`] runs every optimiser step.
+static BIAS_GROUP: std::sync::LazyLock<ParamGroup> =
+    std::sync::LazyLock::new(|| ParamGroup::from_regex(BIAS).expect("BIAS is a valid regex"));
+
 /// Factor of `lr` at (0-based) `epoch`, before warmup.
 pub fn epoch_factor(t: &TrainConfig, epoch: usize) -> f64 {
     let e = epoch as f64;
@@ -76,9 +80,10 @@ pub fn step_lr(
 ) -> (ModuleLearningRate, f64) {
     let lr = lr_at(t, epoch, iter, per_epoch);
     let bias = bias_lr_at(t, epoch, iter, per_epoch);
-    let group = ParamGroup::from_regex(BIAS).expect("BIAS is a valid regex");
     (
-        ModuleLrScheduler::new(lr).with_group(group, bias).step(),
+        ModuleLrScheduler::new(lr)
+            .with_group(BIAS_GROUP.clone(), bias)
+            .step(),
         lr,
     )
 }
