@@ -16,7 +16,9 @@ use crate::config::{self, DeviceKind};
 use crate::train::checkpoint::Checkpoint;
 use crate::train::trainer::{model_config, train, TrainOptions};
 
-use super::models::{measure_in_child, run_accuracy, write_report, Effort, Row, Variant};
+use super::models::{
+    finished_report, measure_in_child, run_accuracy, write_report, Effort, Row, Variant,
+};
 
 /// One ablation variant: a name (its run folder), what it changes, the `--set` overrides.
 pub struct AblationVariant {
@@ -225,11 +227,7 @@ pub fn ablation(o: &AblationOptions) -> Result<String> {
         pre.push('.');
     }
     write_report(&o.out, &rows, &pre)?;
-    let md = std::fs::read_to_string(o.out.join("bench.md"))?;
-    Ok(format!(
-        "{md}\nwrote bench.csv, bench.md and plots in {}",
-        o.out.display()
-    ))
+    finished_report(&o.out)
 }
 
 #[cfg(test)]

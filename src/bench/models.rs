@@ -800,10 +800,16 @@ pub fn bench_models(o: &BenchOptions, quiet: bool) -> Result<String> {
         write_report(&o.out, &rows, &preamble(o, rows.len(), total, t0))?;
     }
     write_report(&o.out, &rows, &preamble(o, rows.len(), total, t0))?;
-    let md = std::fs::read_to_string(o.out.join("bench.md"))?;
+    finished_report(&o.out)
+}
+
+/// The finished report's table plus where its files are: what `bench models` and
+/// `bench ablation` print last.
+pub(super) fn finished_report(out: &std::path::Path) -> Result<String> {
+    let md = std::fs::read_to_string(out.join("bench.md"))?;
     Ok(format!(
         "{md}\nwrote bench.csv, bench.md and plots in {}",
-        o.out.display()
+        out.display()
     ))
 }
 
