@@ -1,31 +1,43 @@
 #!/bin/sh
-# The AP-producing trainings behind BENCHMARKS.md, run one after another on the shared
-# 2-core dev box (about 1.2 h there, under load; finished steps are read back, not redone): the CPU-protocol sweep (configs/cpu_protocol.toml;
-# 1 seed; 0/50/100/150/200 synthetic = the paper's 0/250/…/1000 per 60 real, scaled to 12
-# real training images) and the scene ablation trainings (cpu_protocol + 50 synthetic,
-# one model option changed per variant). Training is deterministic, so the AP numbers do
-# not depend on machine load. Every step is resumable: rerun the script after a stop.
+# The AP-producing trainings behind BENCHMARKS.md. Training is deterministic (the same
+# config gives the same metrics bit for bit, also across thread counts), so the AP numbers
+# do not depend on machine load; every step is resumable: rerun the script after a stop
+# and finished runs are read back, not redone.
+#
+# - the YOLO CPU-protocol sweep (configs/cpu_protocol.toml; 3 seeds; 0/50/100/200
+#   synthetic = the paper's 0/250/500/1000 per 60 real, scaled to 12 real training images);
+# - the Mask R-CNN CPU-protocol runs (configs/cpu_protocol_maskrcnn.toml; ResNet-18; 1 seed;
+#   0 and 100 synthetic);
+# - the equal-compute control (real only for 78 epochs);
+# - the scene-ablation trainings (cpu_protocol + 50 synthetic, one model option changed).
+#
+# On the 2-core dev box the sweep and the Mask R-CNN runs took about 2 h as two
+# single-threaded processes side by side (RAYON_NUM_THREADS=1 each: small 256 px tensors
+# use two threads poorly, so two runs at once finish sooner than one after another).
 #
 # Usage: bench/cpu_protocol_runs.sh [path/to/chicktrain]   (run from the repository root)
 set -e
 CT=${1:-chicktrain}
 SWEEP=runs/sweep/cpu_protocol
+MRCNN=runs/sweep/cpu_protocol_maskrcnn
 ABL=runs/ablation/cpu_protocol
-sweep() { "$CT" sweep --config configs/cpu_protocol.toml --seeds 1 --out $SWEEP --quiet --syn "$1"; }
+sweep() { "$CT" sweep --config configs/cpu_protocol.toml --seeds 3 --out $SWEEP --quiet --syn "$1"; }
 sweep 0,50
-# The ablation's base variant is exactly the sweep's 50-synthetic run.
+# The ablation's base variant is exactly the sweep's 50-synthetic seed-0 run.
 mkdir -p $ABL
 [ -e $ABL/base/test.json ] || { rm -rf $ABL/base; cp -r $SWEEP/syn50_seed0 $ABL/base; }
 "$CT" bench ablation --out $ABL --train-only --quiet
 sweep 0,50,100,200
+"$CT" sweep --config configs/cpu_protocol_maskrcnn.toml --seeds 1 --syn 0,100 --out $MRCNN --quiet
 # At 15 epochs the real-only run gets 2 steps per epoch (30 in all) and learns nothing; this
 # row gives it the optimiser steps of the 50-synthetic run (78 epochs x 12 images).
 "$CT" sweep --config configs/cpu_protocol.toml --seeds 1 --syn 0 --set train.epochs=78 \
   --out runs/sweep/cpu_protocol_real_78ep --quiet
-sweep 0,50,100,150,200
 # Copy the small report files that BENCHMARKS.md shows.
 R=bench/results/sweep_cpu_protocol
-mkdir -p $R
+mkdir -p $R bench/results/sweep_cpu_protocol_maskrcnn
 cp $SWEEP/sweep.md $SWEEP/sweep.csv $SWEEP/sweep.png $SWEEP/runs.csv $R/
 cp runs/sweep/cpu_protocol_real_78ep/sweep.md $R/real_78ep.md
 cp $SWEEP/syn200_seed0/plots.png $R/syn200_run_plots.png
+cp $MRCNN/sweep.md $MRCNN/sweep.csv $MRCNN/runs.csv $MRCNN/sweep.png bench/results/sweep_cpu_protocol_maskrcnn/
+cp $MRCNN/syn100_seed0/plots.png bench/results/sweep_cpu_protocol_maskrcnn/syn100_run_plots.png

@@ -17,6 +17,10 @@ pub const SHIPPED: &[(&str, &str)] = &[
         include_str!("../configs/cpu_protocol.toml"),
     ),
     (
+        "cpu_protocol_maskrcnn.toml",
+        include_str!("../configs/cpu_protocol_maskrcnn.toml"),
+    ),
+    (
         "quickstart.toml",
         include_str!("../configs/quickstart.toml"),
     ),

@@ -384,9 +384,19 @@ fn run(cli: Cli) -> anyhow::Result<String> {
                 quiet,
             } => {
                 use chicktrain::bench::models as bm;
+                // Checkpoints alone time just those models, not the whole default grid.
+                let grid = checkpoints.is_empty() || quick || variants.is_some() || sizes.is_some();
                 let mut o = bm::BenchOptions {
-                    variants: bm::default_variants(),
-                    sizes: bm::DEFAULT_SIZES.to_vec(),
+                    variants: if grid {
+                        bm::default_variants()
+                    } else {
+                        Vec::new()
+                    },
+                    sizes: if grid {
+                        bm::DEFAULT_SIZES.to_vec()
+                    } else {
+                        Vec::new()
+                    },
                     effort: bm::Effort::default(),
                     checkpoints,
                     out: PathBuf::new(),

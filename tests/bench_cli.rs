@@ -74,6 +74,55 @@ fn bench_models_quick_writes_table_and_plot() {
 }
 
 #[test]
+fn bench_models_scores_only_the_given_checkpoint() {
+    let d = tmp("models_ck");
+    let run_dir = d.join("run");
+    common::assert_success(&run(&common::smoke_args(&run_dir, &[])));
+    let out = d.join("report");
+    let ck = run_dir.join("best.bpk");
+    let text = ok(&run(&[
+        "bench",
+        "models",
+        "--checkpoints",
+        ck.to_str().unwrap(),
+        "--warmup",
+        "0",
+        "--repeats",
+        "2",
+        "--train-batch",
+        "2",
+        "--train-steps",
+        "1",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    // Checkpoints alone: one row, not the default variant × size grid.
+    let csv = std::fs::read_to_string(out.join("bench.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 2, "{csv}\n{text}");
+    let header: Vec<&str> = lines[0].split(',').collect();
+    let row: Vec<&str> = lines[1].split(',').collect();
+    let test: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("test.json")).unwrap()).unwrap();
+    for kind in ["bbox", "segm"] {
+        let ap: f64 = row[header
+            .iter()
+            .position(|h| *h == format!("{kind}_AP"))
+            .unwrap()]
+        .parse()
+        .unwrap();
+        let want = test[kind]["stats"][0].as_f64().unwrap();
+        assert!(
+            (ap - want).abs() < 5e-4,
+            "{kind} AP {ap} vs test.json {want}"
+        );
+    }
+    assert!(out.join("ap_vs_latency.png").exists());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
 fn bench_models_rejects_bad_variants_and_sizes() {
     assert_clean_error(&run(&["bench", "models", "--variants", "yolo-x"]), "yolo-x");
     assert_clean_error(&run(&["bench", "models", "--sizes", "100"]), "100");

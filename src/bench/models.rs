@@ -751,7 +751,7 @@ fn preamble(o: &BenchOptions, done: usize, total: usize, t0: Instant) -> String 
 
 /// `chicktrain bench models`.
 pub fn bench_models(o: &BenchOptions, quiet: bool) -> Result<String> {
-    if o.variants.is_empty() || (o.sizes.is_empty() && o.checkpoints.is_empty()) {
+    if o.checkpoints.is_empty() && (o.variants.is_empty() || o.sizes.is_empty()) {
         bail!("nothing to measure: give --variants and --sizes, or --checkpoints");
     }
     // Read every checkpoint first: a bad path fails before minutes of timing.
