@@ -386,17 +386,14 @@ fn run(cli: Cli) -> anyhow::Result<String> {
                 use chicktrain::bench::models as bm;
                 // Checkpoints alone time just those models, not the whole default grid.
                 let grid = checkpoints.is_empty() || quick || variants.is_some() || sizes.is_some();
+                let (default_variants, default_sizes) = if grid {
+                    (bm::default_variants(), bm::DEFAULT_SIZES.to_vec())
+                } else {
+                    (Vec::new(), Vec::new())
+                };
                 let mut o = bm::BenchOptions {
-                    variants: if grid {
-                        bm::default_variants()
-                    } else {
-                        Vec::new()
-                    },
-                    sizes: if grid {
-                        bm::DEFAULT_SIZES.to_vec()
-                    } else {
-                        Vec::new()
-                    },
+                    variants: default_variants,
+                    sizes: default_sizes,
                     effort: bm::Effort::default(),
                     checkpoints,
                     out: PathBuf::new(),

@@ -12,6 +12,18 @@ fn ok(out: &Output) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// Timing effort small enough for a test: no warm-up, 2 timed runs, 1 training step of 2.
+const FAST_TIMING: [&str; 8] = [
+    "--warmup",
+    "0",
+    "--repeats",
+    "2",
+    "--train-batch",
+    "2",
+    "--train-steps",
+    "1",
+];
+
 fn assert_clean_error(out: &Output, needle: &str) {
     common::assert_clean_error(out, &[needle]);
 }
@@ -81,22 +93,11 @@ fn bench_models_scores_only_the_given_checkpoint() {
     let out = d.join("report");
     let ck = run_dir.join("best.bpk");
     let text = ok(&run(&[
-        "bench",
-        "models",
-        "--checkpoints",
-        ck.to_str().unwrap(),
-        "--warmup",
-        "0",
-        "--repeats",
-        "2",
-        "--train-batch",
-        "2",
-        "--train-steps",
-        "1",
-        "--quiet",
-        "--out",
-        out.to_str().unwrap(),
-    ]));
+        &["bench", "models", "--checkpoints", ck.to_str().unwrap()][..],
+        &FAST_TIMING,
+        &["--quiet", "--out", out.to_str().unwrap()],
+    ]
+    .concat()));
     // Checkpoints alone: one row, not the default variant × size grid.
     let csv = std::fs::read_to_string(out.join("bench.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
@@ -145,27 +146,21 @@ fn bench_models_rejects_bad_variants_and_sizes() {
 fn ablation_times_untrained_variants_without_training() {
     let d = tmp("ablation");
     let text = ok(&run(&[
-        "bench",
-        "ablation",
-        "--variants",
-        "base,no_p3",
-        "--set",
-        "data.image_size=64",
-        "--set",
-        "data.crop=64",
-        "--no-train",
-        "--warmup",
-        "0",
-        "--repeats",
-        "2",
-        "--train-batch",
-        "2",
-        "--train-steps",
-        "1",
-        "--quiet",
-        "--out",
-        d.to_str().unwrap(),
-    ]));
+        &[
+            "bench",
+            "ablation",
+            "--variants",
+            "base,no_p3",
+            "--set",
+            "data.image_size=64",
+            "--set",
+            "data.crop=64",
+            "--no-train",
+        ][..],
+        &FAST_TIMING,
+        &["--quiet", "--out", d.to_str().unwrap()],
+    ]
+    .concat()));
     assert!(
         text.contains("| base | 64 |") && text.contains("| no_p3 | 64 |"),
         "{text}"
