@@ -170,6 +170,10 @@ enum Command {
         /// Write the runs and the report here instead of runs/sweep/<name>/.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Train nothing: report the finished runs in the output folder and name the
+        /// missing ones (for a sweep split over several processes or cut short).
+        #[arg(long)]
+        no_train: bool,
         #[arg(long, value_enum)]
         device: Option<DeviceArg>,
         /// No progress bars or per-epoch lines.
@@ -473,6 +477,7 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             set,
             smoke,
             out,
+            no_train,
             device,
             quiet,
         }) => chicktrain::bench::sweep::sweep(&chicktrain::bench::sweep::SweepOptions {
@@ -482,6 +487,7 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             overrides: set,
             smoke,
             out,
+            no_train,
             device: device.map(Into::into),
             quiet,
         }),

@@ -227,6 +227,34 @@ fn smoke_sweep_reports_two_settings_and_resumes() {
     assert!(again.status.success(), "{err}");
     assert_eq!(err.matches("done, reading it").count(), 2, "{err}");
     assert_eq!(std::fs::read_to_string(out.join("sweep.csv")).unwrap(), csv);
+    // --no-train reports the finished runs and names the missing one without training it.
+    let partial = [
+        &args[..4],
+        &["4,2", "--seeds", "2", "--no-train", "--quiet"],
+        &args[7..],
+    ];
+    let text = ok(&run(&partial.concat()));
+    assert!(text.contains("| Real + 2 syn | 1 |"), "{text}");
+    assert!(!text.contains("| Real + 4 syn"), "{text}");
+    assert!(
+        text.contains("syn2_seed1, syn4_seed0, syn4_seed1"),
+        "{text}"
+    );
+    assert!(
+        !out.join("syn4_seed0").exists(),
+        "--no-train must not train"
+    );
+    assert_clean_error(
+        &run(&[
+            "sweep",
+            "--config",
+            "quickstart.toml",
+            "--no-train",
+            "--out",
+            d.join("empty").to_str().unwrap(),
+        ]),
+        "no finished run",
+    );
     assert_clean_error(
         &run(&["sweep", "--config", "quickstart.toml", "--syn", "0,abc"]),
         "abc",

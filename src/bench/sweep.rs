@@ -9,8 +9,9 @@
 //! markdown table) and `sweep.png` (AP vs synthetic count, ± std bars).
 //!
 //! Resumable: a setting whose folder already has `test.json` is read, not retrained; one
-//! with only `last.bpk` continues from it. Seed `k` of a sweep is `seed + k`. That seed
-//! drives everything the config's seed drives — the proxy-real draw and the split
+//! with only `last.bpk` continues from it; `--no-train` reports what finished and names
+//! the rest, for a sweep whose seeds ran in separate processes. Seed `k` of a sweep is
+//! `seed + k`. That seed drives everything the config's seed drives — the proxy-real draw and the split
 //! included — so with proxy-real data the spread over seeds also covers test-set
 //! variation, where the paper keeps one split and varies only training.
 
@@ -38,6 +39,8 @@ pub struct SweepOptions {
     /// Every run shrunk to a ~1 minute smoke run.
     pub smoke: bool,
     pub out: Option<PathBuf>,
+    /// Train nothing: report the runs that finished, name the missing ones.
+    pub no_train: bool,
     pub device: Option<DeviceKind>,
     /// No progress bars or per-epoch lines.
     pub quiet: bool,
@@ -282,10 +285,13 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join("sweep").join(&name));
-    std::fs::create_dir_all(&out)
-        .with_context(|| format!("cannot create sweep folder {}", out.display()))?;
+    if !o.no_train {
+        std::fs::create_dir_all(&out)
+            .with_context(|| format!("cannot create sweep folder {}", out.display()))?;
+    }
     crate::train::interrupt::install();
     let mut results = Vec::new();
+    let mut missing = Vec::new();
     let total = o.synthetic.len() * o.seeds;
     for &n in &o.synthetic {
         for k in 0..o.seeds as u64 {
@@ -299,6 +305,10 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
             if dir.join("test.json").exists() {
                 say(format!("sweep: {} done, reading it", dir.display()));
                 results.push(read_run(&dir, n, seed)?);
+                continue;
+            }
+            if o.no_train {
+                missing.push(format!("syn{n}_seed{seed}"));
                 continue;
             }
             let mut set = o.overrides.clone();
@@ -335,7 +345,19 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
             results.push(read_run(&dir, n, seed)?);
         }
     }
-    let protocol = format!(
+    if results.is_empty() {
+        bail!(
+            "--no-train: no finished run (a folder with test.json) in {} for --syn {} --seeds {}",
+            out.display(),
+            o.synthetic
+                .iter()
+                .map(|n| n.to_string())
+                .collect::<Vec<_>>()
+                .join(","),
+            o.seeds
+        );
+    }
+    let mut protocol = format!(
         "Config `{}`{}{}; {} seed(s) per setting (seed {}…{}); test split of each run, \
          `best.bpk` (best val segm AP). Runs: `{}`.",
         o.config,
@@ -350,9 +372,14 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
         base.seed + o.seeds as u64 - 1,
         out.display()
     );
-    let s = write_report(&out, &results, &protocol)?;
+    if !missing.is_empty() {
+        protocol.push_str(&format!(
+            " Not trained (left out; the runs column counts the finished ones): {}.",
+            missing.join(", ")
+        ));
+    }
+    write_report(&out, &results, &protocol)?;
     let md = std::fs::read_to_string(out.join("sweep.md"))?;
-    let _ = s;
     Ok(format!(
         "{md}\nwrote sweep.md, sweep.csv, runs.csv, sweep.png in {}",
         out.display()
