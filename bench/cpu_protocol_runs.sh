@@ -7,12 +7,13 @@
 #
 # - the YOLO CPU-protocol sweep (configs/cpu_protocol.toml; 3 seeds; 0/50/100/200
 #   synthetic = the paper's 0/250/500/1000 per 60 real, scaled to 12 real training images);
-# - the Mask R-CNN CPU-protocol runs (configs/cpu_protocol_maskrcnn.toml; ResNet-18; 1 seed;
-#   100 synthetic only so far);
+# - the Mask R-CNN CPU-protocol runs (configs/cpu_protocol_maskrcnn.toml; ResNet-18; real
+#   only and +50 with 3 seeds, +100 with 1; +200 not trained: ≈ 2.7 h a run at 1 thread);
 # - the equal-compute control (real only for 78 epochs);
 # - the scene-ablation trainings (cpu_protocol + 50 synthetic, one model option changed).
 #
-# On the 2-core dev box the sweep and the Mask R-CNN run took about 2 h as two
+# On the 2-core dev box the YOLO sweep and the Mask R-CNN +100 run took about 2 h, the
+# Mask R-CNN real-only and +50 runs about 1.7 h, as two
 # single-threaded processes side by side (RAYON_NUM_THREADS=1 each: small 256 px tensors
 # use two threads poorly, so two runs at once finish sooner than one after another).
 #
@@ -29,7 +30,11 @@ mkdir -p $ABL
 [ -e $ABL/base/test.json ] || { rm -rf $ABL/base; cp -r $SWEEP/syn50_seed0 $ABL/base; }
 "$CT" bench ablation --out $ABL --train-only --quiet
 sweep 0,50,100,200
-"$CT" sweep --config configs/cpu_protocol_maskrcnn.toml --seeds 1 --syn 100 --out $MRCNN --quiet
+mrcnn() { "$CT" sweep --config configs/cpu_protocol_maskrcnn.toml --out $MRCNN --quiet "$@"; }
+mrcnn --seeds 1 --syn 100
+mrcnn --seeds 3 --syn 0,50
+# The report over every finished run (the runs column counts them; missing ones are named).
+mrcnn --seeds 3 --syn 0,50,100,200 --no-train
 # At 15 epochs the real-only run gets 2 steps per epoch (30 in all) and learns nothing; this
 # row gives it the optimiser steps of the 50-synthetic run (78 epochs x 12 images).
 "$CT" sweep --config configs/cpu_protocol.toml --seeds 1 --syn 0 --set train.epochs=78 \
