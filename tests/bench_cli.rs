@@ -227,7 +227,7 @@ fn smoke_sweep_reports_two_settings_and_resumes() {
     assert!(again.status.success(), "{err}");
     assert_eq!(err.matches("done, reading it").count(), 2, "{err}");
     assert_eq!(std::fs::read_to_string(out.join("sweep.csv")).unwrap(), csv);
-    // --no-train reports the finished runs and names the missing one without training it.
+    // --no-train reports the finished runs and names the missing ones without training them.
     let partial = [
         &args[..4],
         &["4,2", "--seeds", "2", "--no-train", "--quiet"],

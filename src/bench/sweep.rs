@@ -11,9 +11,9 @@
 //! Resumable: a setting whose folder already has `test.json` is read, not retrained; one
 //! with only `last.bpk` continues from it; `--no-train` reports what finished and names
 //! the rest, for a sweep whose seeds ran in separate processes. Seed `k` of a sweep is
-//! `seed + k`. That seed drives everything the config's seed drives — the proxy-real draw and the split
-//! included — so with proxy-real data the spread over seeds also covers test-set
-//! variation, where the paper keeps one split and varies only training.
+//! `seed + k`. That seed drives everything the config's seed drives — the proxy-real draw
+//! and the split included — so with proxy-real data the spread over seeds also covers
+//! test-set variation, where the paper keeps one split and varies only training.
 
 use std::path::{Path, PathBuf};
 
