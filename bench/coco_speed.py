@@ -1,13 +1,14 @@
 #!/usr/bin/env python3
 """Times chicktrain's COCO evaluator against pycocotools and faster-coco-eval, side by side.
 
-The case mirrors ../shared/notes/peers-measured.md: 180 images (640x640), ~871 polygon GT
+The case mirrors bench/results/peers-measured.md: 180 images (640x640), ~871 polygon GT
 instances, ~1759 RLE detections with boxes. Each tool is timed on load + evaluate +
 accumulate (summarize excluded), median of N runs, all on this machine in one run.
 
-  python3 -m venv /tmp/cocovenv && /tmp/cocovenv/bin/pip install pycocotools==2.0.11 faster-coco-eval==1.8.0
+From the repository root (bench/requirements.txt pins pycocotools 2.0.11, faster-coco-eval 1.8.0):
+  python3 -m venv .venv && .venv/bin/pip install -r bench/requirements.txt
   cargo build --release
-  /tmp/cocovenv/bin/python bench/coco_speed.py --bin target/release/chicktrain --repeats 11
+  .venv/bin/python bench/coco_speed.py --bin target/release/chicktrain --repeats 11
 """
 import argparse
 import contextlib

@@ -4,7 +4,8 @@
 # from the finished trainings of bench/cpu_protocol_runs.sh (deterministic, any load).
 #
 # Usage: bench/run_all.sh [path/to/chicktrain]   (from the repository root; default:
-# target/release/chicktrain or $CARGO_TARGET_DIR/release/chicktrain, built if missing)
+# target/release/chicktrain or $CARGO_TARGET_DIR/release/chicktrain, built if missing;
+# PYTHON=... picks the interpreter of step 4, default .venv/bin/python)
 set -e
 CT=${1:-${CARGO_TARGET_DIR:-target}/release/chicktrain}
 [ -x "$CT" ] || cargo build --release
@@ -24,10 +25,15 @@ if [ -d runs/ablation/cpu_protocol/base ]; then
   mkdir -p $R/ablation
   cp runs/ablation/cpu_protocol/bench.* runs/ablation/cpu_protocol/*.png $R/ablation/
 fi
-# 4. Same-machine references (optional: the Python venvs of the README).
-if [ -x /tmp/ulvenv/bin/python ]; then
-  /tmp/ulvenv/bin/python bench/ultralytics_yolo.py 256 320 640 > $R/ultralytics_yolo.txt 2>&1 || true
-  THREADS=$(nproc) RUNS=2 /tmp/ulvenv/bin/python tests/fixtures/maskrcnn/bench_torchvision.py \
+# 4. Same-machine references (optional): ultralytics and torchvision from the venv of
+#    bench/requirements.txt (python3 -m venv .venv && .venv/bin/pip install -r
+#    bench/requirements.txt), or the interpreter named by $PYTHON.
+PY=${PYTHON:-.venv/bin/python}
+if command -v "$PY" > /dev/null 2>&1; then
+  "$PY" bench/ultralytics_yolo.py 256 320 640 > $R/ultralytics_yolo.txt 2>&1 || true
+  THREADS=$(nproc) RUNS=2 "$PY" tests/fixtures/maskrcnn/bench_torchvision.py \
     50:256,50:512,101:512 > $R/torchvision_maskrcnn.txt 2>&1 || true
+else
+  echo "skipping the ultralytics / torchvision references: no $PY (see bench/requirements.txt)" >&2
 fi
 date -u +"finished %Y-%m-%dT%H:%MZ" >> $R/machine.txt

@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
-"""Times ultralytics YOLO11n-seg on the CPU the way ../shared/notes/peers-measured.md did,
+"""Times ultralytics YOLO11n-seg on the CPU the way bench/results/peers-measured.md did,
 to put chicktrain's `examples/yolo_bench` numbers side by side on the same machine.
 
-  /tmp/ulvenv/bin/pip install ultralytics==8.4.190
-  /tmp/ulvenv/bin/python bench/ultralytics_yolo.py 320 640
+From the repository root (bench/requirements.txt pins ultralytics 8.4.190, torch 2.15.0):
+  python3 -m venv .venv && .venv/bin/pip install -r bench/requirements.txt
+  .venv/bin/python bench/ultralytics_yolo.py 320 640
   cargo run --release --example yolo_bench -- n 320 640
 
 Train step: SegmentationModel('yolo11n-seg.yaml', nc=1), default hyperparameters, SGD,
