@@ -5,10 +5,11 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 
-use chicktrain::cli;
+use chicktrain::commands::bench::{self as bench_cmd, EffortFlags};
+use chicktrain::commands::data;
+use chicktrain::commands::train::{self as train_cmd, SplitName};
 use chicktrain::config::DeviceKind;
 use chicktrain::eval::IouType;
-use chicktrain::train::commands::{self, SplitName};
 use chicktrain::train::trainer::TrainOptions;
 
 /// Train instance segmentation of chicken carcass piles from real + rendered images.
@@ -72,7 +73,7 @@ impl TrainArgs {
             device: self.device.map(Into::into),
             quiet: false,
         };
-        cli::train(&c, &self.set, &opts)
+        train_cmd::train_cmd(&c, &self.set, &opts)
     }
 }
 
@@ -188,7 +189,7 @@ enum Command {
 }
 
 /// How much `bench models` / `bench ablation` measure per row (unset: the defaults of
-/// [`chicktrain::bench::models::Effort`], or of `--quick`).
+/// `chicktrain::bench::models::Effort`, or of `--quick`).
 #[derive(Args, Clone, Copy)]
 struct EffortArgs {
     /// Untimed batch-1 runs before the timed ones [default: 3].
@@ -205,19 +206,15 @@ struct EffortArgs {
     train_steps: Option<usize>,
 }
 
-impl EffortArgs {
-    fn over(self, base: chicktrain::bench::models::Effort) -> chicktrain::bench::models::Effort {
-        chicktrain::bench::models::Effort {
-            warmup: self.warmup.unwrap_or(base.warmup),
-            repeats: self.repeats.unwrap_or(base.repeats),
-            train_batch: self.train_batch.unwrap_or(base.train_batch),
-            train_steps: self.train_steps.unwrap_or(base.train_steps),
+impl From<EffortArgs> for EffortFlags {
+    fn from(e: EffortArgs) -> EffortFlags {
+        EffortFlags {
+            warmup: e.warmup,
+            repeats: e.repeats,
+            train_batch: e.train_batch,
+            train_steps: e.train_steps,
         }
     }
-}
-
-fn this_exe() -> anyhow::Result<PathBuf> {
-    std::env::current_exe().map_err(|e| anyhow::anyhow!("cannot locate this binary: {e}"))
 }
 
 #[derive(Subcommand)]
@@ -347,7 +344,7 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             data,
             json,
             device,
-        }) => commands::eval_cmd(
+        }) => train_cmd::eval_cmd(
             &checkpoint,
             split,
             data.as_deref(),
@@ -359,7 +356,7 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             input,
             out,
             device,
-        }) => commands::predict_cmd(&checkpoint, &input, &out, device.map(Into::into)),
+        }) => train_cmd::predict_cmd(&checkpoint, &input, &out, device.map(Into::into)),
         Some(Command::Render {
             out,
             count,
@@ -367,15 +364,15 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             size,
             preset,
             carcass,
-        }) => cli::render(&out, count, seed, size, &preset, carcass),
+        }) => data::render(&out, count, seed, size, &preset, carcass),
         Some(Command::Bench { what }) => match what {
-            BenchWhat::Coco { gt, dt, repeats } => cli::bench_coco(&gt, &dt, repeats),
+            BenchWhat::Coco { gt, dt, repeats } => data::bench_coco(&gt, &dt, repeats),
             BenchWhat::Render {
                 size,
                 images,
                 preset,
                 seed,
-            } => cli::bench_render(size, images, &preset, seed),
+            } => data::bench_render(size, images, &preset, seed),
             BenchWhat::Models {
                 variants,
                 sizes,
@@ -386,41 +383,17 @@ fn run(cli: Cli) -> anyhow::Result<String> {
                 effort,
                 device,
                 quiet,
-            } => {
-                use chicktrain::bench::models as bm;
-                // Checkpoints alone time just those models, not the whole default grid.
-                let grid = checkpoints.is_empty() || quick || variants.is_some() || sizes.is_some();
-                let (default_variants, default_sizes) = if grid {
-                    (bm::default_variants(), bm::DEFAULT_SIZES.to_vec())
-                } else {
-                    (Vec::new(), Vec::new())
-                };
-                let mut o = bm::BenchOptions {
-                    variants: default_variants,
-                    sizes: default_sizes,
-                    effort: bm::Effort::default(),
-                    checkpoints,
-                    out: PathBuf::new(),
-                    device: device.into(),
-                    exe: this_exe()?,
-                };
-                if quick {
-                    bm::quick(&mut o);
-                }
-                o.effort = effort.over(o.effort);
-                if let Some(v) = variants {
-                    o.variants = v
-                        .split(',')
-                        .map(|s| s.trim().parse())
-                        .collect::<anyhow::Result<_>>()?;
-                }
-                if let Some(s) = sizes {
-                    o.sizes = bm::parse_sizes(&s)?;
-                }
-                let name = name.unwrap_or_else(|| if quick { "quick" } else { "models" }.into());
-                o.out = out.unwrap_or_else(|| PathBuf::from("runs/bench").join(name));
-                bm::bench_models(&o, quiet)
-            }
+            } => bench_cmd::models(bench_cmd::ModelsRequest {
+                variants,
+                sizes,
+                checkpoints,
+                quick,
+                name,
+                out,
+                effort: effort.into(),
+                device: device.into(),
+                quiet,
+            }),
             BenchWhat::Ablation {
                 config,
                 syn,
@@ -432,44 +405,31 @@ fn run(cli: Cli) -> anyhow::Result<String> {
                 effort,
                 device,
                 quiet,
-            } => {
-                let name = chicktrain::config::load(&config, &set)?.name;
-                chicktrain::bench::ablation::ablation(
-                    &chicktrain::bench::ablation::AblationOptions {
-                        config,
-                        synthetic: syn,
-                        overrides: set,
-                        only: variants
-                            .map(|v| v.split(',').map(|s| s.trim().to_string()).collect())
-                            .unwrap_or_default(),
-                        out: out.unwrap_or_else(|| PathBuf::from("runs/ablation").join(name)),
-                        train_only,
-                        no_train,
-                        effort: effort.over(Default::default()),
-                        device: device.into(),
-                        exe: this_exe()?,
-                        quiet,
-                    },
-                )
-            }
+            } => bench_cmd::ablation_cmd(bench_cmd::AblationRequest {
+                config,
+                synthetic: syn,
+                overrides: set,
+                variants,
+                out,
+                train_only,
+                no_train,
+                effort: effort.into(),
+                device: device.into(),
+                quiet,
+            }),
             BenchWhat::ModelWorker {
                 variant,
                 size,
                 effort,
                 device,
-            } => chicktrain::bench::models::worker(
-                &variant,
-                size,
-                effort.over(Default::default()),
-                device.into(),
-            ),
+            } => bench_cmd::model_worker(&variant, size, effort.into(), device.into()),
         },
         Some(Command::CocoEval {
             gt,
             dt,
             iou_type,
             json,
-        }) => cli::coco_eval(&gt, &dt, iou_type, json),
+        }) => data::coco_eval(&gt, &dt, iou_type, json),
         Some(Command::Sweep {
             config,
             syn,
@@ -480,9 +440,9 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             no_train,
             device,
             quiet,
-        }) => chicktrain::bench::sweep::sweep(&chicktrain::bench::sweep::SweepOptions {
+        }) => bench_cmd::sweep_cmd(bench_cmd::SweepRequest {
             config,
-            synthetic: chicktrain::bench::sweep::parse_counts(&syn)?,
+            synthetic: syn,
             seeds,
             overrides: set,
             smoke,
@@ -493,9 +453,9 @@ fn run(cli: Cli) -> anyhow::Result<String> {
         }),
         Some(Command::Convert { what }) => match what {
             ConvertWhat::Labelme { dir, out, labels } => {
-                cli::convert_labelme(&dir, labels.as_deref(), &out)
+                data::convert_labelme(&dir, labels.as_deref(), &out)
             }
-            ConvertWhat::Coco2yolo { coco, out } => cli::convert_coco2yolo(&coco, &out),
+            ConvertWhat::Coco2yolo { coco, out } => data::convert_coco2yolo(&coco, &out),
         },
     }
 }

@@ -244,7 +244,8 @@ fn render_writes_a_loadable_deterministic_dataset() {
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert!(String::from_utf8_lossy(&o.stdout).contains("proxy"));
-        let ds = chicktrain::data::coco::CocoDataset::load(&out.join("annotations.json")).unwrap();
+        let ds = chicktrain::annotations::coco::CocoDataset::load(&out.join("annotations.json"))
+            .unwrap();
         assert_eq!(ds.images.len(), 2);
         assert!(out.join("preview.png").exists());
         outs.push(out);

@@ -7,10 +7,10 @@
 
 use std::path::PathBuf;
 
-use chicktrain::data::coco::{load_results, CocoDataset};
-use chicktrain::data::mask::Mask;
-use chicktrain::data::polygon::rle_from_polygon;
-use chicktrain::data::rle::{rle_iou, Rle};
+use chicktrain::annotations::coco::{load_results, CocoDataset};
+use chicktrain::annotations::mask::Mask;
+use chicktrain::annotations::polygon::rle_from_polygon;
+use chicktrain::annotations::rle::{rle_iou, Rle};
 use chicktrain::eval::{evaluate, IouType};
 use serde_json::Value;
 

@@ -6,7 +6,7 @@
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
-use chicktrain::model::common::ConvBn;
+use chicktrain::model::detection::{box_iou, nms};
 use chicktrain::model::maskrcnn::anchors::AnchorConfig;
 use chicktrain::model::maskrcnn::box_coder::{clip_box, BoxCoder};
 use chicktrain::model::maskrcnn::losses::{bce_with_logits, cross_entropy, smooth_l1};
@@ -14,7 +14,8 @@ use chicktrain::model::maskrcnn::mask_head::{mask_loss, MaskHeadConfig};
 use chicktrain::model::maskrcnn::roi_heads::RoiHeadsConfig;
 use chicktrain::model::maskrcnn::rpn::RpnConfig;
 use chicktrain::model::maskrcnn::{ImageTargets, MaskRcnnConfig};
-use chicktrain::model::yolo::postprocess::{box_iou, nms, postprocess};
+use chicktrain::model::yolo::blocks::ConvBn;
+use chicktrain::model::yolo::postprocess::postprocess;
 use chicktrain::model::yolo::{AnchorGrid, Scale, YoloOutput, YoloSegConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
-use chicktrain::data::labelme;
-use chicktrain::data::rle::Rle;
+use chicktrain::annotations::labelme;
+use chicktrain::annotations::rle::Rle;
 
 /// `rle` target, `#!ST1llllllllllllJ`: a 13-character count whose last character carries
 /// the sign bit made `rleFrString`'s sign extension shift by 65 (overflow panic; without
@@ -49,7 +49,7 @@ fn labelme_circle_with_a_huge_radius() {
         {"label": "wing", "points": [[150, 150], [150, 250]], "shape_type": "circle"}]}"#;
     let ds = labelme::from_json(text, Path::new("/nonexistent/fuzz.json")).unwrap();
     match &ds.annotations[0].segmentation {
-        chicktrain::data::coco::Segmentation::Polygons(p) => assert_eq!(p[0].len(), 2 * 22),
+        chicktrain::annotations::coco::Segmentation::Polygons(p) => assert_eq!(p[0].len(), 2 * 22),
         other => panic!("{other:?}"),
     }
 }

@@ -8,8 +8,8 @@
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use chicktrain::data::coco::{CocoDataset, Segmentation};
-use chicktrain::data::labelme;
+use chicktrain::annotations::coco::{CocoDataset, Segmentation};
+use chicktrain::annotations::labelme;
 
 fn examples() -> Option<PathBuf> {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/fixtures/labelme-examples");

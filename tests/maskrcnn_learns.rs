@@ -7,11 +7,11 @@
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
-use chicktrain::data::coco::{
+use chicktrain::annotations::coco::{
     CocoAnnotation, CocoCategory, CocoDataset, CocoImage, Detection as CocoDetection, Segmentation,
 };
-use chicktrain::data::mask::Mask;
-use chicktrain::data::rle::Rle;
+use chicktrain::annotations::mask::Mask;
+use chicktrain::annotations::rle::Rle;
 use chicktrain::eval::coco_eval::{evaluate, IouType};
 use chicktrain::model::maskrcnn::anchors::AnchorConfig;
 use chicktrain::model::maskrcnn::mask_head::MaskHeadConfig;

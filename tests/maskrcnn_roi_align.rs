@@ -8,6 +8,7 @@
 use burn::tensor::{Device, Distribution, Tensor, TensorData};
 use chicktrain::model::maskrcnn::pooler::pool_levels;
 use chicktrain::model::maskrcnn::roi_align::{roi_align, roi_align_host};
+use chicktrain::util::tensor::to_host;
 use serde_json::Value;
 
 fn load() -> Value {
@@ -34,10 +35,6 @@ fn dims<const D: usize>(v: &Value) -> [usize; D] {
         .map(|x| x.as_u64().unwrap() as usize)
         .collect();
     u.try_into().unwrap()
-}
-
-fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data_as::<f32>().try_into_vec::<f32>().unwrap()
 }
 
 fn check_fixture(dev: &Device) {
@@ -67,7 +64,7 @@ fn check_fixture(dev: &Device) {
             dims::<4>(&c["output_shape"]).to_vec(),
             "case {ci}"
         );
-        let got = to_vec(got);
+        let got = to_host(got);
         let mut worst = 0f32;
         for (g, w) in got.iter().zip(&want) {
             worst = worst.max((g - w).abs());
@@ -119,7 +116,7 @@ fn gradient_check(dev: Device) {
     let shape = [2, 2, 6, 7];
     dev.seed(3);
     let x0: Tensor<4> = Tensor::random(shape, Distribution::Normal(0.0, 1.0), &dev);
-    let xv = to_vec(x0.clone());
+    let xv = to_host(x0.clone());
     let rois = vec![
         (0, [1.0f32, 0.5, 5.5, 4.0]),
         (1, [-1.5, 2.0, 3.0, 7.5]),
@@ -128,16 +125,16 @@ fn gradient_check(dev: Device) {
     ];
     let out_hw = [3, 4];
     let r: Tensor<4> = Tensor::random([rois.len(), 2, 3, 4], Distribution::Normal(0.0, 1.0), &dev);
-    let rv = to_vec(r.clone());
+    let rv = to_host(r.clone());
     let f = |x: Vec<f32>| -> f64 {
         let t = Tensor::<4>::from_data(TensorData::new(x, shape), &dev);
-        let o = to_vec(roi_align(t, &rois, 1.0, out_hw, 2));
+        let o = to_host(roi_align(t, &rois, 1.0, out_hw, 2));
         o.iter().zip(&rv).map(|(a, b)| *a as f64 * *b as f64).sum()
     };
     let x = Tensor::<4>::from_data(TensorData::new(xv.clone(), shape), &ad).require_grad();
     let rr = Tensor::<4>::from_data(TensorData::new(rv.clone(), [rois.len(), 2, 3, 4]), &ad);
     let loss = (roi_align(x.clone(), &rois, 1.0, out_hw, 2) * rr).sum();
-    let g = to_vec(x.grad(&loss.backward()).expect("features get a gradient"));
+    let g = to_host(x.grad(&loss.backward()).expect("features get a gradient"));
     let eps = 0.05f32;
     let mut nonzero = 0;
     for i in 0..xv.len() {
@@ -184,11 +181,11 @@ fn pooler_gradient_reaches_the_assigned_level_only() {
         2,
     );
     let grads = out.sum().backward();
-    let g2 = to_vec(p2.grad(&grads).unwrap());
+    let g2 = to_host(p2.grad(&grads).unwrap());
     assert!(
         (g2.iter().sum::<f32>() - 2.0 * 49.0).abs() < 1e-3,
         "every output bin's weights sum to 1"
     );
-    let g3 = p3.grad(&grads).map(to_vec).unwrap_or_default();
+    let g3 = p3.grad(&grads).map(to_host).unwrap_or_default();
     assert!(g3.iter().all(|v| *v == 0.0));
 }

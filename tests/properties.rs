@@ -3,10 +3,10 @@
 //! R-CNN box coder's encode/decode round trip and clamp, and that arbitrary (hostile)
 //! strings and polygons give errors or results, never panics.
 
-use chicktrain::data::coco::Segmentation;
-use chicktrain::data::mask::Mask;
-use chicktrain::data::polygon::{mask_to_polygons, rle_from_polygons};
-use chicktrain::data::rle::{bbox_iou, rle_iou, Rle};
+use chicktrain::annotations::coco::Segmentation;
+use chicktrain::annotations::mask::Mask;
+use chicktrain::annotations::polygon::{mask_to_polygons, rle_from_polygons};
+use chicktrain::annotations::rle::{bbox_iou, rle_iou, Rle};
 use chicktrain::model::maskrcnn::box_coder::BoxCoder;
 use proptest::prelude::*;
 

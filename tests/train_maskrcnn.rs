@@ -6,9 +6,10 @@
 
 use std::path::{Path, PathBuf};
 
+use chicktrain::commands::train::{eval_cmd, predict_cmd, SplitName};
 use chicktrain::config::{self, Config, DeviceKind};
-use chicktrain::train::commands::{eval_cmd, predict_cmd, SplitName};
-use chicktrain::train::trainer::{smoke_config, train, TrainOptions};
+use chicktrain::train::smoke::smoke_config;
+use chicktrain::train::trainer::{train, TrainOptions};
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("ct-mrcnn-{name}-{}", std::process::id()));
@@ -54,8 +55,10 @@ fn smoke_run_evaluates_reloads_and_resumes() {
         assert!(run.join(f).is_file(), "{f} missing");
     }
     let resolved = config::load(run.join("config.toml").to_str().unwrap(), &[]).unwrap();
-    assert_eq!(resolved.model.kind, config::ModelKind::Maskrcnn);
-    assert_eq!(resolved.model.depth, Some(50));
+    let config::ModelConfig::Maskrcnn(m) = &resolved.model else {
+        panic!("resolved config is not a Mask R-CNN: {:?}", resolved.model)
+    };
+    assert_eq!(m.depth, 50);
     let lines: Vec<serde_json::Value> = std::fs::read_to_string(run.join("metrics.jsonl"))
         .unwrap()
         .lines()
@@ -107,7 +110,7 @@ fn smoke_run_evaluates_reloads_and_resumes() {
         .unwrap();
     predict_cmd(&run.join("best.bpk"), &img_dir, &dir.join("pred"), None).unwrap();
     assert!(dir.join("pred/a.png").is_file());
-    chicktrain::data::coco::load_results(&dir.join("pred/results.json")).unwrap();
+    chicktrain::annotations::coco::load_results(&dir.join("pred/results.json")).unwrap();
 
     // --resume continues from last.bpk to a third epoch (without --smoke, which caps
     // epochs at 2, on the smoke-shrunk config).
@@ -134,7 +137,9 @@ fn smoke_run_evaluates_reloads_and_resumes() {
         "{e}"
     );
     let mut deeper = shrunk;
-    deeper.model.depth = Some(101);
+    if let config::ModelConfig::Maskrcnn(m) = &mut deeper.model {
+        m.depth = 101;
+    }
     deeper.train.epochs = 4;
     let e = format!("{:#}", train(deeper, &o).unwrap_err());
     assert!(

@@ -6,8 +6,8 @@
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
+use chicktrain::annotations::coco::{CocoCategory, CocoDataset, CocoImage};
 use chicktrain::data::batch::collate;
-use chicktrain::data::coco::{CocoCategory, CocoDataset, CocoImage};
 use chicktrain::data::dataset::{from_rendered, render_options};
 use chicktrain::eval::{evaluate, IouType};
 use chicktrain::model::yolo::loss::{yolo_loss, LossWeights};

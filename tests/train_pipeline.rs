@@ -5,8 +5,8 @@
 
 use std::path::{Path, PathBuf};
 
+use chicktrain::commands::train::{eval_cmd, predict_cmd, SplitName};
 use chicktrain::config::{self, Config, DeviceKind};
-use chicktrain::train::commands::{eval_cmd, predict_cmd, SplitName};
 use chicktrain::train::trainer::{train, TrainOptions};
 
 fn tmp(name: &str) -> PathBuf {
@@ -114,7 +114,7 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
         .unwrap();
     predict_cmd(&run.join("best.bpk"), &img_dir, &dir.join("pred"), None).unwrap();
     assert!(dir.join("pred/a.png").is_file());
-    chicktrain::data::coco::load_results(&dir.join("pred/results.json")).unwrap();
+    chicktrain::annotations::coco::load_results(&dir.join("pred/results.json")).unwrap();
 
     // --resume continues from last.bpk to a third epoch.
     let mut o = opts(&dir);
@@ -122,7 +122,7 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     let cfg = tiny(&dir, &["train.epochs=3"]);
     // smoke caps epochs at 2, so resume without smoke on the smoke-shrunk config.
     let mut shrunk = cfg.clone();
-    chicktrain::train::trainer::smoke_config(&mut shrunk);
+    chicktrain::train::smoke::smoke_config(&mut shrunk);
     shrunk.train.epochs = 3;
     o.smoke = false;
     train(shrunk, &o).unwrap();
@@ -133,7 +133,7 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     assert_eq!(n, 3, "resume appends epoch 3 only");
     // Resuming a finished run says so.
     let mut again = cfg;
-    chicktrain::train::trainer::smoke_config(&mut again);
+    chicktrain::train::smoke::smoke_config(&mut again);
     again.train.epochs = 3;
     let e = format!("{:#}", train(again, &o).unwrap_err());
     assert!(e.contains("already completed 3 of 3"), "{e}");

@@ -6,10 +6,9 @@
 //! the JSON.
 
 use burn::tensor::{Device, Tensor, TensorData};
+use chicktrain::data::targets::{ImageTargets, Targets};
 use chicktrain::model::yolo::assigner::{assign_image, ciou, AssignerConfig};
-use chicktrain::model::yolo::loss::{
-    ciou_tensor, yolo_loss, ImageTargets, LossWeights, YoloTargets,
-};
+use chicktrain::model::yolo::loss::{ciou_tensor, yolo_loss, LossWeights};
 use chicktrain::model::yolo::{AnchorGrid, YoloOutput};
 use serde_json::Value;
 
@@ -152,7 +151,7 @@ fn assigner_matches_ultralytics() {
     assert!(total_fg > 10, "fixture exercises positives ({total_fg})");
 }
 
-fn output_and_targets(case: &Value, dev: &Device) -> (YoloOutput, YoloTargets) {
+fn output_and_targets(case: &Value, dev: &Device) -> (YoloOutput, Targets) {
     let input = case["input"].as_u64().unwrap() as usize;
     let nc = case["num_classes"].as_u64().unwrap() as usize;
     let nm = case["num_masks"].as_u64().unwrap() as usize;
@@ -173,7 +172,7 @@ fn output_and_targets(case: &Value, dev: &Device) -> (YoloOutput, YoloTargets) {
         ),
         grid,
     };
-    let mut targets = YoloTargets::default();
+    let mut targets = Targets::default();
     for img in images {
         let mut t = ImageTargets {
             boxes: img["boxes"].as_array().unwrap().iter().map(box4).collect(),

@@ -5,7 +5,7 @@
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
-use chicktrain::model::yolo::bench::synthetic_batch;
+use chicktrain::data::ellipses::ellipse_batch;
 use chicktrain::model::yolo::loss::{yolo_loss, LossWeights};
 use chicktrain::model::yolo::postprocess::postprocess;
 use chicktrain::model::yolo::{Scale, YoloSegConfig};
@@ -27,7 +27,7 @@ fn train(dev: Device, steps: usize, calib: usize) -> (Vec<f32>, chicktrain::mode
         .with_num_masks(8);
     let mut model = cfg.init(&ad);
     let mut optim = AdamWConfig::new().with_weight_decay(0.0).init();
-    let (px, targets) = synthetic_batch(BATCH, SIZE, 2, 3);
+    let (px, targets) = ellipse_batch(BATCH, SIZE, 2, 3);
     let x = Tensor::<4>::from_data(TensorData::new(px, [BATCH, 3, SIZE, SIZE]), &ad);
     let w = LossWeights::default();
     let mut losses = Vec::new();
@@ -72,7 +72,7 @@ fn tiny_model_learns_on_flex() {
     // with score > 0.25 has mask IoU ≥ 0.5 (touching ellipses are still merged by NMS
     // sometimes after so few steps, hence 3/4 and not all).
     let eval = model.valid();
-    let (px, targets) = synthetic_batch(BATCH, SIZE, 2, 3);
+    let (px, targets) = ellipse_batch(BATCH, SIZE, 2, 3);
     let x = Tensor::<4>::from_data(TensorData::new(px, [BATCH, 3, SIZE, SIZE]), &Device::flex());
     let o = eval.forward(x.clone());
     let dets = postprocess(&o, 0.25, 0.7, 50);

@@ -3,7 +3,8 @@
 //! zero-height / zero-area boxes, and saturated logits (±1e4) in every head output.
 
 use burn::tensor::{Device, Distribution, Tensor};
-use chicktrain::model::yolo::loss::{yolo_loss, ImageTargets, LossWeights, YoloTargets};
+use chicktrain::data::targets::{ImageTargets, Targets};
+use chicktrain::model::yolo::loss::{yolo_loss, LossWeights};
 use chicktrain::model::yolo::{AnchorGrid, YoloOutput};
 
 const IMG: usize = 64;
@@ -55,7 +56,7 @@ fn image(boxes: &[[f32; 4]]) -> ImageTargets {
 
 fn assert_finite(
     dev: &Device,
-    targets: &YoloTargets,
+    targets: &Targets,
     fill: &dyn Fn([usize; 4]) -> Tensor<4>,
     what: &str,
 ) -> usize {
@@ -95,8 +96,8 @@ fn saturated(s: [usize; 4]) -> Tensor<4> {
     Tensor::from_data(burn::tensor::TensorData::new(v, s), &Device::flex())
 }
 
-fn degenerate_batch() -> YoloTargets {
-    YoloTargets {
+fn degenerate_batch() -> Targets {
+    Targets {
         images: vec![
             image(&[[10.0, 10.0, 40.0, 30.0], [20.0, 5.0, 20.0, 35.0]]), // zero width
             image(&[[5.0, 40.0, 50.0, 40.0]]),                           // zero height
@@ -123,7 +124,7 @@ fn finite_with_saturated_logits() {
 #[test]
 fn all_empty_batch_has_only_a_class_loss() {
     let dev = Device::flex().autodiff();
-    let t = YoloTargets {
+    let t = Targets {
         images: vec![image(&[]), image(&[])],
     };
     assert_eq!(assert_finite(&dev, &t, &saturated, "all-empty ±1e4"), 0);
@@ -149,7 +150,7 @@ fn p4_p5_model_without_attention_trains_a_step() {
     // Heads on strides 16 and 32 only (prototypes at 1/8), no C2PSA: the assigner's minimum
     // GT side becomes 32 px and the mask loss runs at the coarser prototype grid.
     use burn::tensor::TensorData;
-    use chicktrain::model::yolo::bench::synthetic_batch;
+    use chicktrain::data::ellipses::ellipse_batch;
     use chicktrain::model::yolo::{HeadLevels, Scale, YoloSegConfig};
     let dev = Device::flex().autodiff();
     dev.seed(5);
@@ -159,7 +160,7 @@ fn p4_p5_model_without_attention_trains_a_step() {
         .with_levels(HeadLevels::P4P5)
         .with_c2psa(false)
         .init(&dev);
-    let (px, targets) = synthetic_batch(2, 64, 3, 9);
+    let (px, targets) = ellipse_batch(2, 64, 3, 9);
     let x = Tensor::<4>::from_data(TensorData::new(px, [2, 3, 64, 64]), &dev);
     let out = model.forward(x);
     assert_eq!(out.proto.dims()[2..], [8, 8]);
@@ -192,7 +193,7 @@ fn finite_with_huge_crowded_duplicate_and_maskless_targets() {
         .collect();
     let mut maskless = image(&[[8.0, 8.0, 40.0, 40.0], [20.0, 30.0, 60.0, 50.0]]);
     maskless.masks.iter_mut().for_each(|m| m.fill(0));
-    let t = YoloTargets {
+    let t = Targets {
         images: vec![
             image(&[[-5000.0, -5000.0, 5000.0, 5000.0], [0.0, 0.0, 1e4, 30.0]]),
             image(&crowd),

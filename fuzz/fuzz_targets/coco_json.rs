@@ -2,7 +2,7 @@
 //! rasterises every segmentation to a mask of its image's size.
 #![no_main]
 
-use chicktrain::data::coco::CocoDataset;
+use chicktrain::annotations::coco::CocoDataset;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use chicktrain::data::labelme;
+use chicktrain::annotations::labelme;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

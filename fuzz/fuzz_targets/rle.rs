@@ -2,7 +2,7 @@
 //! same counts, and its area (and, when canonical, its box) stays inside the image.
 #![no_main]
 
-use chicktrain::data::rle::Rle;
+use chicktrain::annotations::rle::Rle;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

@@ -6,4 +6,3 @@
 
 pub mod ablation;
 pub mod models;
-pub mod sweep;

@@ -29,14 +29,17 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::config::DeviceKind;
+use crate::data::ellipses::ellipse_batch;
 use crate::eval::plots::{pareto_front, write_png, Mark, Panel, Series, PALETTE};
 use crate::eval::report::{percentile, Table};
 use crate::model::maskrcnn::MaskRcnnConfig;
-use crate::model::yolo::bench::synthetic_batch;
-use crate::model::yolo::loss::{to_host, yolo_loss, LossWeights};
+use crate::model::yolo::loss::{yolo_loss, LossWeights};
 use crate::model::yolo::{HeadLevels, Scale, YoloSegConfig};
 use crate::train::detector::DetectorConfig;
-use crate::train::trainer::device_of;
+use crate::train::device::device_of;
+use crate::train::evaluate::SplitName;
+use crate::train::run_files;
+use crate::util::tensor::to_host;
 
 /// A model variant by name: `yolo-<n|s>` with optional suffixes `-p45` (heads on P4–P5
 /// only), `-nopsa` (no C2PSA attention), `-w<f>` (width multiplier), `-m<k>` (mask
@@ -276,9 +279,9 @@ pub fn measure(variant: &Variant, size: usize, e: Effort, device: &Device) -> Re
     }
     device.seed(0);
     let ad = device.clone().autodiff();
-    let (px1, _) = synthetic_batch(1, size, 6, 1);
+    let (px1, _) = ellipse_batch(1, size, 6, 1);
     let x1 = Tensor::<4>::from_data(TensorData::new(px1, [1, 3, size, size]), device);
-    let (pxb, targets) = synthetic_batch(e.train_batch, size, 6, 2);
+    let (pxb, targets) = ellipse_batch(e.train_batch, size, 6, 2);
     let xb = Tensor::<4>::from_data(TensorData::new(pxb, [e.train_batch, 3, size, size]), &ad);
     let mut optim = SgdConfig::new()
         .with_momentum(Some(
@@ -341,9 +344,7 @@ pub fn measure(variant: &Variant, size: usize, e: Effort, device: &Device) -> Re
                 let losses = model.forward_train(xb.clone(), &targets.images, &mut rng);
                 let grads = GradientsParams::from_grads(losses.total.backward(), &model);
                 model = optim.step(0.01, model, grads);
-                let _ = crate::model::maskrcnn::losses::to_vec(
-                    model.box_head.cls_score.weight.val().sum(),
-                );
+                let _ = to_host(model.box_head.cls_score.weight.val().sum());
                 if r >= 1 {
                     steps.push(ms(t));
                 }
@@ -441,48 +442,24 @@ pub struct Row {
     pub acc: Option<Accuracy>,
 }
 
-fn run_train_seconds(dir: &Path) -> f64 {
-    std::fs::read_to_string(dir.join("metrics.jsonl"))
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        .filter_map(|r| r["time"].as_f64())
-        .sum()
-}
-
-/// Test AP of a checkpoint, through `eval` on its own test split.
+/// Test AP of a checkpoint on its own test split.
 pub fn checkpoint_accuracy(ck: &Path, device: Option<DeviceKind>) -> Result<Accuracy> {
-    let j = crate::train::commands::eval_cmd(
-        ck,
-        crate::train::commands::SplitName::Test,
-        None,
-        device,
-        true,
-    )?;
-    let v: serde_json::Value = serde_json::from_str(&j)?;
-    let get = |k: &str| -> Result<[f64; 12]> {
-        let s: Vec<f64> = v[k]["stats"]
-            .as_array()
-            .map(|a| a.iter().filter_map(|x| x.as_f64()).collect())
-            .unwrap_or_default();
-        s.try_into()
-            .map_err(|_| anyhow::anyhow!("eval of {} gave no {k} stats", ck.display()))
-    };
+    let score = crate::train::evaluate::score_checkpoint(ck, SplitName::Test, None, device)?;
     Ok(Accuracy {
-        bbox: get("bbox")?,
-        segm: get("segm")?,
-        train_seconds: run_train_seconds(ck.parent().unwrap_or(Path::new("."))),
+        bbox: score.stats.bbox,
+        segm: score.stats.segm,
+        train_seconds: run_files::train_seconds(ck.parent().unwrap_or(Path::new(".")))?,
         source: ck.display().to_string(),
     })
 }
 
 /// Test AP of a finished run folder (its `test.json`).
 pub fn run_accuracy(dir: &Path) -> Result<Accuracy> {
-    let r = crate::bench::sweep::read_run(dir, 0, 0)?;
+    let t = run_files::read_test(dir)?;
     Ok(Accuracy {
-        bbox: r.bbox,
-        segm: r.segm,
-        train_seconds: r.train_seconds,
+        bbox: t.bbox.stats,
+        segm: t.segm.stats,
+        train_seconds: run_files::train_seconds(dir)?,
         source: dir.display().to_string(),
     })
 }

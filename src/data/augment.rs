@@ -8,7 +8,7 @@ use image::RgbImage;
 use rand::Rng;
 
 use super::dataset::{Instance, Sample};
-use super::mask::Mask;
+use crate::annotations::mask::Mask;
 
 /// What to apply.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,5 +1,5 @@
 //! Batching: samples of one size → the model's `[B, 3, H, W]` input (values in [0, 1],
-//! channel planes) and [`YoloTargets`] (boxes xyxy in pixels from the masks, classes,
+//! channel planes) and [`Targets`] (boxes xyxy in pixels from the masks, classes,
 //! masks at input resolution).
 //!
 //! Instances whose box is under 2 px wide or high are dropped, as ultralytics'
@@ -7,10 +7,10 @@
 
 use anyhow::{bail, Result};
 
-use crate::model::yolo::loss::{ImageTargets, YoloTargets};
+use crate::data::targets::{ImageTargets, Targets};
 
 use super::dataset::Sample;
-use super::mask::Mask;
+use crate::annotations::mask::Mask;
 
 /// A batch ready for the device.
 #[derive(Clone, Debug)]
@@ -18,7 +18,7 @@ pub struct Batch {
     /// `[B, 3, H, W]` row-major.
     pub pixels: Vec<f32>,
     pub dims: [usize; 4],
-    pub targets: YoloTargets,
+    pub targets: Targets,
 }
 
 /// Tight xyxy box of a mask (exclusive max), or None if empty.
@@ -82,7 +82,7 @@ pub fn collate(samples: &[Sample]) -> Result<Batch> {
     Ok(Batch {
         pixels,
         dims: [b, 3, h, w],
-        targets: YoloTargets { images },
+        targets: Targets { images },
     })
 }
 

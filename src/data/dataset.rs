@@ -1,5 +1,5 @@
 //! Training data sources: the "real" set (proxy-real renders, a COCO file + image folder,
-//! or a LabelMe folder) and the synthetic stream, both yielding [`Sample`]s at the
+//! or a LabelMe folder) and the synthetic renders, both yielding [`Sample`]s at the
 //! network's square input size.
 //!
 //! The real set keeps its COCO ground truth at the *original* image size (that is what
@@ -9,7 +9,7 @@
 //! RGBA and 16-bit images are converted to RGB8. Missing or corrupt files fail with the
 //! file's path.
 //!
-//! Synthetic images come from the renderer (`render::stream::load_or_render`),
+//! Synthetic images come from the renderer through its cache (`render::cache`),
 //! deterministic per (seed, index), cached under the cache root; with `fresh_synthetic`
 //! the seed changes every epoch and nothing is cached.
 
@@ -19,14 +19,14 @@ use anyhow::{bail, Context, Result};
 use image::RgbImage;
 use rayon::prelude::*;
 
+use crate::annotations::coco::{CocoCategory, CocoDataset, CocoImage};
+use crate::annotations::labelme;
+pub use crate::annotations::mask::resize_mask;
+use crate::annotations::mask::Mask;
 use crate::config::{DataConfig, RealKind};
-use crate::data::coco::{CocoCategory, CocoDataset, CocoImage};
-use crate::data::labelme;
 use crate::data::letterbox::Letterbox;
-pub use crate::data::mask::resize_mask;
-use crate::data::mask::Mask;
+use crate::render::cache::{cache_dir, effective_seed, load_or_render};
 use crate::render::export::{annotations, visible_mask, CARCASS_CATEGORY};
-use crate::render::stream::{cache_key, effective_seed, load_or_render};
 use crate::render::{RenderOptions, RenderedSample};
 
 /// One instance of a training sample: class index (0-based, in category order) and its
@@ -57,7 +57,7 @@ pub fn render_options(proxy: bool, size: u32) -> RenderOptions {
     o
 }
 
-pub use super::image_file::{read_image, to_rgb8};
+pub use crate::annotations::image_file::{read_image, to_rgb8};
 
 /// Where the real images come from.
 #[derive(Clone, Debug)]
@@ -79,8 +79,6 @@ pub struct RealSet {
     pub gt: CocoDataset,
     /// Category ids in class-index order (sorted by id).
     pub cat_ids: Vec<u64>,
-    /// Network input size.
-    pub size: u32,
     /// True for proxy-real renders (every report must call them a proxy).
     pub proxy: bool,
     source: RealSource,
@@ -98,13 +96,9 @@ impl RealSet {
             RealKind::Proxy => {
                 let opts = render_options(true, size);
                 let cache = match cache_root {
-                    Some(r) => Some(r.join(cache_key(&opts, seed)?)),
+                    Some(r) => Some(cache_dir(r, &opts, seed)?),
                     None => None,
                 };
-                if let Some(c) = &cache {
-                    std::fs::create_dir_all(c)
-                        .with_context(|| format!("cannot create cache folder {}", c.display()))?;
-                }
                 let n = limit.map_or(real.count, |l| l.min(real.count));
                 let anns = render_many(
                     &opts,
@@ -175,11 +169,8 @@ impl RealSet {
             gt.annotations
                 .retain(|a| ids.binary_search(&a.image_id).is_ok());
         }
-        if gt.images.len() < 3 {
-            bail!(
-                "the real dataset has {} images; at least 3 are needed (one per split)",
-                gt.images.len()
-            );
+        if gt.images.is_empty() {
+            bail!("the real dataset has no images");
         }
         if gt.categories.is_empty() {
             bail!("the real dataset has no categories");
@@ -202,7 +193,6 @@ impl RealSet {
         Ok(RealSet {
             gt,
             cat_ids,
-            size,
             proxy: matches!(source, RealSource::Proxy { .. }),
             source,
         })
@@ -231,7 +221,7 @@ impl RealSet {
     }
 
     /// The image only, at the network input size, plus its original `(width, height)`.
-    pub fn image(&self, id: u64) -> Result<(RgbImage, (u32, u32))> {
+    pub fn image(&self, id: u64, input: u32) -> Result<(RgbImage, (u32, u32))> {
         let im = self
             .gt
             .image(id)
@@ -257,12 +247,12 @@ impl RealSet {
             }
         };
         let orig = (im.width, im.height);
-        Ok((Letterbox::new(orig, self.size).image(&img), orig))
+        Ok((Letterbox::new(orig, input).image(&img), orig))
     }
 
     /// Image and non-crowd instances at the network input size.
-    pub fn sample(&self, id: u64) -> Result<Sample> {
-        let (image, (w, h)) = self.image(id)?;
+    pub fn sample(&self, id: u64, input: u32) -> Result<Sample> {
+        let (image, (w, h)) = self.image(id, input)?;
         let mut instances = Vec::new();
         for a in self.gt.annotations.iter().filter(|a| a.image_id == id) {
             if a.iscrowd != 0 {
@@ -275,7 +265,7 @@ impl RealSet {
                 .segmentation
                 .to_rle(h, w)
                 .with_context(|| format!("annotation {} of image {id}", a.id))?;
-            let mask = Letterbox::new((w, h), self.size).mask(&rle.decode());
+            let mask = Letterbox::new((w, h), input).mask(&rle.decode());
             if mask.area() > 0 {
                 instances.push(Instance { class, mask });
             }
@@ -295,7 +285,7 @@ fn render_many<T: Send>(
     what: &str,
     keep: impl Fn(u64, RenderedSample) -> T + Sync,
 ) -> Result<Vec<T>> {
-    let bar = crate::train::progress::bar(n, what);
+    let bar = crate::util::progress::bar(n, what);
     let out: Result<Vec<T>> = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -354,15 +344,11 @@ impl SyntheticSet {
             return Ok(None);
         }
         match &self.cache_root {
-            Some(r) => {
-                let d = r.join(cache_key(
-                    &self.opts,
-                    effective_seed(self.seed, epoch, false),
-                )?);
-                std::fs::create_dir_all(&d)
-                    .with_context(|| format!("cannot create cache folder {}", d.display()))?;
-                Ok(Some(d))
-            }
+            Some(r) => Ok(Some(cache_dir(
+                r,
+                &self.opts,
+                effective_seed(self.seed, epoch, false),
+            )?)),
             None => Ok(None),
         }
     }
@@ -470,7 +456,7 @@ mod tests {
         assert_eq!(set.ids(), vec![1, 2, 3, 4]);
         assert_eq!(set.cat_ids, vec![CARCASS_CATEGORY]);
         for id in set.ids() {
-            let s = set.sample(id).unwrap();
+            let s = set.sample(id, 64).unwrap();
             assert_eq!(s.image.dimensions(), (64, 64));
             let gt: Vec<Mask> = set
                 .gt

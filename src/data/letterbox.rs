@@ -10,7 +10,7 @@
 
 use image::{imageops::FilterType, Rgb, RgbImage};
 
-use crate::data::mask::{resize_mask, Mask};
+use crate::annotations::mask::{resize_mask, Mask};
 
 /// The padding grey of ultralytics' `LetterBox`.
 pub const PAD_GREY: u8 = 114;

@@ -1,19 +1,14 @@
-//! Data: COCO files and masks (RLE, polygons), LabelMe import, YOLO export, splits, and
-//! the training side (feature `train`): sources (`dataset`), augmentation (`augment`),
-//! batching (`batch`).
+//! The training loader, above the renderer: sources (`dataset`: the real set and the
+//! synthetic renders), augmentation (`augment`), batching (`batch`) into the model-neutral
+//! ground truth [`targets::Targets`], and the letterbox between image and network input.
+//! The COCO types it reads live in [`crate::annotations`].
 
 #[cfg(feature = "train")]
 pub mod augment;
 #[cfg(feature = "train")]
 pub mod batch;
-pub mod coco;
 #[cfg(feature = "train")]
 pub mod dataset;
-pub mod image_file;
-pub mod labelme;
+pub mod ellipses;
 pub mod letterbox;
-pub mod mask;
-pub mod polygon;
-pub mod rle;
-pub mod split;
-pub mod yolo_export;
+pub mod targets;

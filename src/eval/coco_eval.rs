@@ -13,8 +13,8 @@ use std::collections::HashMap;
 
 use anyhow::{bail, Context, Result};
 
-use crate::data::coco::{CocoDataset, Detection, Segmentation};
-use crate::data::rle::{bbox_iou, rle_iou, Rle};
+use crate::annotations::coco::{CocoDataset, Detection, Segmentation};
+use crate::annotations::rle::{bbox_iou, rle_iou, Rle};
 
 /// Which geometry IoU is computed on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

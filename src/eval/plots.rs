@@ -11,7 +11,6 @@ use std::path::Path;
 use std::sync::Once;
 
 use anyhow::{anyhow, Result};
-use image::ImageEncoder;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
@@ -278,13 +277,7 @@ pub fn render_png(panels: &[Panel], cols: usize, panel_w: u32, panel_h: u32) -> 
         root.present()
             .map_err(|e| anyhow!("finishing the plot: {e:?}"))?;
     }
-    let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new_with_quality(
-        &mut png,
-        image::codecs::png::CompressionType::Best,
-        image::codecs::png::FilterType::Adaptive,
-    )
-    .write_image(&buf, w, h, image::ExtendedColorType::Rgb8)?;
+    let png = crate::util::png::encode_rgb8(&buf, w, h, image::codecs::png::CompressionType::Best)?;
     Ok(png)
 }
 

@@ -1,12 +1,18 @@
 //! Instance-segmentation models.
 //!
-//! - [`common`]: blocks shared by the model families (Conv-BN-SiLU, C3k2, SPPF, C2PSA, Proto).
+//! - [`yolo`]: the YOLO11-seg-style one-stage model (its blocks, task-aligned assigner,
+//!   losses and postprocess).
 //! - [`maskrcnn`]: the two-stage Mask R-CNN (ResNet-FPN, RPN, RoIAlign, box and mask heads).
-//! - [`yolo`]: the YOLO11-seg-style one-stage model, its task-aligned assigner, losses and
-//!   postprocess.
+//! - Shared by both: [`detection`] (what a model predicts, box IoU, NMS), [`layers`]
+//!   (parameter and MAC counts, upsampling), [`loss`] (overflow-free primitives) and
+//!   [`summary`] (model size).
 //!
-//! Nothing here reads the training config: every model is built from its own typed config.
+//! Models read their ground truth as [`crate::data::targets::Targets`] and nothing of the
+//! trainer: every model is built from its own typed config.
 
-pub mod common;
+pub mod detection;
+pub mod layers;
+pub mod loss;
 pub mod maskrcnn;
+pub mod summary;
 pub mod yolo;

@@ -7,10 +7,10 @@
 use image::{imageops, Rgb, RgbImage};
 use serde_json::{json, Map, Value};
 
-use crate::data::coco::{CocoAnnotation, Segmentation};
-use crate::data::mask::Mask;
-use crate::data::polygon::mask_to_polygons;
-use crate::data::rle::Rle;
+use crate::annotations::coco::{CocoAnnotation, Segmentation};
+use crate::annotations::mask::Mask;
+use crate::annotations::polygon::mask_to_polygons;
+use crate::annotations::rle::Rle;
 
 use super::labels::InstanceLabel;
 

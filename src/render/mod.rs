@@ -1,19 +1,20 @@
 //! chicktrain's built-in renderer: posed procedural carcasses piled on a steel plate,
 //! ray traced with soft shadows, auto-labelled (visible + amodal masks, visib_fract) and
-//! written as COCO, or streamed to the trainer.
+//! written as COCO, or read by the training loader through the render cache.
 //!
 //! Entry points:
 //! * [`render_sample`]: sample `index` of dataset seed `seed`, deterministic.
 //! * [`render_dataset`]: `images/`, `annotations.json`, `preview.png`, `render_meta.json`.
 //! * [`bench_render`]: images/s and the time split (scene, BVH build, trace, labels,
 //!   sensor, encode).
-//! * [`stream::SampleStream`]: worker threads, bounded queue, on-disk cache.
+//! * [`cache::load_or_render`]: one sample through the on-disk render cache.
 //!
 //! One concept per file: `carcass` (generator), `glb` (asset I/O), `mesh`, `skin` (poses),
 //! `pile` (heightfield drop), `camera`, `light`, `material`, `noise`, `trace` (BVH +
 //! shading), `sensor`, `labels`, `scene` (sampling), `preset` (options), `export`
-//! (COCO + preview), `stream`.
+//! (COCO + preview), `cache`.
 
+pub mod cache;
 pub mod camera;
 pub mod carcass;
 pub mod export;
@@ -28,7 +29,6 @@ pub mod preset;
 pub mod scene;
 pub mod sensor;
 pub mod skin;
-pub mod stream;
 pub mod trace;
 
 use std::path::Path;
@@ -93,7 +93,7 @@ pub struct RenderedSample {
 
 impl RenderedSample {
     /// Visible masks of the kept instances, in `instances` order (data-layer masks).
-    pub fn masks(&self) -> Vec<crate::data::mask::Mask> {
+    pub fn masks(&self) -> Vec<crate::annotations::mask::Mask> {
         let (w, h) = self.image.dimensions();
         self.instances
             .iter()
@@ -189,7 +189,7 @@ pub const PREVIEW_TILES: usize = 16;
 /// `preview.png` (first 16 images, mask overlays and boxes) and `render_meta.json`
 /// (renderer version, options, and the proxy flag for the proxy-real preset).
 pub fn render_dataset(opts: &RenderOptions, out_dir: &Path, progress: bool) -> anyhow::Result<()> {
-    use crate::data::coco::{CocoCategory, CocoDataset, CocoImage};
+    use crate::annotations::coco::{CocoCategory, CocoDataset, CocoImage};
     opts.validate()?;
     scene::asset(opts.carcass.as_ref())?;
     let img_dir = out_dir.join("images");
@@ -206,7 +206,7 @@ pub fn render_dataset(opts: &RenderOptions, out_dir: &Path, progress: bool) -> a
     );
     struct Out {
         image: CocoImage,
-        anns: Vec<crate::data::coco::CocoAnnotation>,
+        anns: Vec<crate::annotations::coco::CocoAnnotation>,
         tile: Option<RgbImage>,
     }
     let results: Vec<anyhow::Result<Out>> = (0..opts.count as u64)
@@ -307,7 +307,7 @@ pub struct BenchReport {
     /// Sequential pass: latency-bound rate.
     pub sequential_images_per_sec: f64,
     /// Throughput with images rendered concurrently on the pool (as `render_dataset`
-    /// and the stream's workers do): serial stages (BVH build, pile drop) overlap.
+    /// and the loader's workers do): serial stages (BVH build, pile drop) overlap.
     pub images_per_sec: f64,
     /// Mean triangles per image.
     pub triangles: f64,
@@ -343,7 +343,7 @@ impl std::fmt::Display for BenchReport {
 
 /// Renders and encodes `images` samples (no files written) twice: one after another (each
 /// using all cores for its rows; gives the per-stage times) and then concurrently (gives
-/// the throughput a dataset render or the training stream sees).
+/// the throughput a dataset render or the training loader sees).
 pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::Result<BenchReport> {
     opts.validate()?;
     let asset = scene::asset(opts.carcass.as_ref())?;
@@ -395,9 +395,9 @@ pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::R
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::coco::Segmentation;
-    use crate::data::polygon::rle_from_polygons;
-    use crate::data::rle::Rle;
+    use crate::annotations::coco::Segmentation;
+    use crate::annotations::polygon::rle_from_polygons;
+    use crate::annotations::rle::Rle;
 
     fn small(size: u32) -> RenderOptions {
         let mut o = RenderOptions::synthetic(size);

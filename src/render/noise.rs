@@ -4,20 +4,7 @@
 
 use glam::{IVec3, Vec3};
 
-/// SplitMix64 finaliser.
-#[inline]
-pub fn mix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// Hash of a few integers.
-#[inline]
-pub fn hash(seed: u64, a: u64, b: u64, c: u64) -> u64 {
-    mix64(mix64(mix64(seed ^ a.wrapping_mul(0x9E37_79B9)) ^ b.wrapping_mul(0x85EB_CA6B)) ^ c)
-}
+pub use crate::util::hash::{hash, mix64};
 
 /// Uniform [0, 1) from a hash.
 #[inline]

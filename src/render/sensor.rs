@@ -9,6 +9,7 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use super::noise::hash;
+pub use crate::util::png::encode_png;
 
 #[inline]
 pub fn srgb_to_linear(c: f32) -> f32 {
@@ -156,15 +157,6 @@ impl Sensor {
 pub fn encode_jpeg(img: &RgbImage, quality: u8) -> anyhow::Result<Vec<u8>> {
     let mut out = Vec::new();
     let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality.clamp(1, 100));
-    img.write_with_encoder(enc)?;
-    Ok(out)
-}
-
-/// PNG bytes with fast compression.
-pub fn encode_png(img: &RgbImage) -> anyhow::Result<Vec<u8>> {
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    let mut out = Vec::new();
-    let enc = PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Adaptive);
     img.write_with_encoder(enc)?;
     Ok(out)
 }

@@ -18,8 +18,8 @@ use burn::store::ModuleRecord;
 use burn::tensor::{Bytes, Device};
 use serde::{Deserialize, Serialize};
 
+use crate::annotations::split::Split;
 use crate::config::Config;
-use crate::data::split::Split;
 
 use super::detector::{Detector, DetectorConfig};
 
@@ -214,7 +214,7 @@ impl<'a> Reader<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::split::Split;
+    use crate::annotations::split::Split;
     use crate::model::yolo::{Scale, YoloSegConfig};
     use burn::tensor::{Tensor, TensorData};
 

@@ -11,12 +11,14 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Config, MaskRcnnPreset, ModelKind};
-use crate::model::maskrcnn::anchors::AnchorConfig;
-use crate::model::maskrcnn::{MaskRcnn, MaskRcnnConfig};
-use crate::model::yolo::loss::{yolo_loss, LossWeights, YoloTargets};
-use crate::model::yolo::postprocess::{postprocess, Detection};
-use crate::model::yolo::{HeadLevels, ModelSummary, Scale, YoloSeg, YoloSegConfig};
+use crate::config::{Config, ModelConfig, ModelKind};
+use crate::data::targets::Targets;
+use crate::model::detection::Detection;
+use crate::model::maskrcnn::{MaskRcnn, MaskRcnnConfig, MaskRcnnLosses};
+use crate::model::summary::ModelSummary;
+use crate::model::yolo::loss::{yolo_loss, LossTerms, LossWeights};
+use crate::model::yolo::postprocess::postprocess;
+use crate::model::yolo::{YoloSeg, YoloSegConfig};
 
 use super::evaluate::{VAL_IOU, VAL_MAX_DET};
 
@@ -50,47 +52,11 @@ impl DetectorConfig {
         if nc == 0 {
             bail!("the data has no categories to train on");
         }
-        Ok(match m.kind {
-            ModelKind::Yolo => DetectorConfig::Yolo(
-                YoloSegConfig::new(if m.scale() == "s" { Scale::S } else { Scale::N }, nc)
-                    .with_input_size(cfg.data.image_size as usize)
-                    .with_levels(if m.levels() == [4, 5] {
-                        HeadLevels::P4P5
-                    } else {
-                        HeadLevels::P3P5
-                    })
-                    .with_c2psa(m.c2psa())
-                    .with_width_mult(m.width_mult)
-                    .with_num_masks(m.prototypes()),
-            ),
-            ModelKind::Maskrcnn => {
-                let depth = m.depth();
-                let mut c = match m.preset() {
-                    MaskRcnnPreset::Compact => MaskRcnnConfig::new(depth, nc),
-                    MaskRcnnPreset::Paper => MaskRcnnConfig::paper(depth, nc),
-                }
-                .with_width_mult(m.width_mult)
-                .with_input_size(cfg.data.image_size as usize);
-                if let Some(f) = m.fpn_channels {
-                    c.fpn_channels = f;
-                }
-                if let Some(s) = &m.anchor_sizes {
-                    c.anchors = AnchorConfig {
-                        sizes: s.clone(),
-                        ..c.anchors
-                    };
-                }
-                let r = &mut c.rpn;
-                r.batch_per_image = m.rpn_batch.unwrap_or(r.batch_per_image);
-                r.pre_nms_topk_train = m.rpn_pre_nms_topk_train.unwrap_or(r.pre_nms_topk_train);
-                r.post_nms_topk_train = m.rpn_post_nms_topk_train.unwrap_or(r.post_nms_topk_train);
-                r.pre_nms_topk_test = m.rpn_pre_nms_topk_test.unwrap_or(r.pre_nms_topk_test);
-                r.post_nms_topk_test = m.rpn_post_nms_topk_test.unwrap_or(r.post_nms_topk_test);
-                c.roi.batch_per_image = m.roi_batch.unwrap_or(c.roi.batch_per_image);
-                c.roi.fc_dim = m.box_fc_dim.unwrap_or(c.roi.fc_dim);
-                c.mask.conv_dim = m.mask_conv_dim.unwrap_or(c.mask.conv_dim);
-                c.mask.class_agnostic = m.mask_class_agnostic.unwrap_or(c.mask.class_agnostic);
-                DetectorConfig::Maskrcnn(c)
+        let input = cfg.data.image_size as usize;
+        Ok(match m {
+            ModelConfig::Yolo(m) => DetectorConfig::Yolo(YoloSegConfig::from_config(m, input, nc)),
+            ModelConfig::Maskrcnn(m) => {
+                DetectorConfig::Maskrcnn(MaskRcnnConfig::from_config(m, input, nc))
             }
         })
     }
@@ -170,15 +136,15 @@ impl Detector {
     /// Names of the loss terms, as logged in `metrics.jsonl` (`loss.<name>`).
     pub fn loss_names(&self) -> &'static [&'static str] {
         match self {
-            Detector::Yolo(_) => &["box", "cls", "dfl", "seg"],
-            Detector::MaskRcnn(_) => &["rpn_cls", "rpn_box", "cls", "box", "mask"],
+            Detector::Yolo(_) => &LossTerms::NAMES,
+            Detector::MaskRcnn(_) => &MaskRcnnLosses::NAMES,
         }
     }
 
     /// Training loss of a batch. `images` are `[B, 3, H, W]` in `[0, 1]` (Mask R-CNN
     /// normalises inside); `sample_seed` drives Mask R-CNN's anchor and RoI sampling, so a
     /// step does not depend on what ran before it.
-    pub fn loss(&self, images: Tensor<4>, targets: &YoloTargets, sample_seed: u64) -> StepLoss {
+    pub fn loss(&self, images: Tensor<4>, targets: &Targets, sample_seed: u64) -> StepLoss {
         match self {
             Detector::Yolo(m) => {
                 let out = m.forward(images);

@@ -27,6 +27,8 @@
 
 use std::collections::VecDeque;
 
+use crate::util::stats::median_f32;
+
 use anyhow::{bail, Result};
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::Tensor;
@@ -80,17 +82,6 @@ impl At {
     }
 }
 
-fn median(v: &VecDeque<f32>) -> f32 {
-    let mut s: Vec<f32> = v.iter().copied().collect();
-    s.sort_by(f32::total_cmp);
-    let n = s.len();
-    if n % 2 == 1 {
-        s[n / 2]
-    } else {
-        0.5 * (s[n / 2 - 1] + s[n / 2])
-    }
-}
-
 impl DivergenceGuard {
     /// A guard for loss terms `names`; the last name must be the total.
     pub fn new(names: &[&str]) -> Self {
@@ -127,9 +118,9 @@ impl DivergenceGuard {
         let n = self.names.len();
         let sum: f32 = values[..n - 1].iter().sum();
         if self.history[n].len() >= MIN_HISTORY {
-            let floor = FLOOR * median(&self.history[n]);
+            let floor = FLOOR * median_f32(self.history[n].iter().copied());
             for (k, name) in self.names.iter().enumerate() {
-                let m = median(&self.history[k]).max(floor);
+                let m = median_f32(self.history[k].iter().copied()).max(floor);
                 if m > 0.0 && values[k] > FACTOR * m {
                     bail!(
                         "training diverged: {name} loss exploded at {}: {} is {:.0}× its running median {m:.4} over the last {} steps (the limit is {FACTOR}×; {all}); {}. Lower train.lr or raise train.warmup_epochs.",
@@ -186,7 +177,8 @@ impl ModuleVisitor for SumSquares {
 pub fn weight_sq_norm<M: Module>(module: &M) -> f64 {
     let mut v = SumSquares { acc: None };
     module.visit(&mut v);
-    v.acc.map_or(0.0, |t| super::scalar(&t) as f64)
+    v.acc
+        .map_or(0.0, |t| crate::util::tensor::scalar(&t) as f64)
 }
 
 /// Fails if any weight of `module` (`what`: "model", "EMA") is not finite, before

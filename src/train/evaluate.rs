@@ -4,19 +4,24 @@
 //! mapped back to each image's original size,
 //! masks as compressed RLE, then the in-tree pycocotools-exact evaluator for bbox and segm.
 
-use anyhow::{Context, Result};
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::data::coco::{CocoDataset, Detection, Segmentation};
+use crate::annotations::coco::{CocoDataset, Detection, Segmentation};
+use crate::annotations::mask::Mask;
+use crate::annotations::rle::Rle;
 use crate::data::dataset::RealSet;
 use crate::data::letterbox::Letterbox;
-use crate::data::mask::Mask;
-use crate::data::rle::Rle;
 use crate::eval::{evaluate, IouType};
-use crate::model::yolo::postprocess::Detection as RawDetection;
+use crate::model::detection::Detection as RawDetection;
 
-use super::checkpoint::Stats;
+use super::checkpoint::{Checkpoint, Stats};
 use super::detector::Detector;
+use super::device::device_of;
+use crate::annotations::split::Split;
+use crate::config::{self, DeviceKind};
 
 /// Validation postprocess settings of YOLO (ultralytics' val defaults; Mask R-CNN uses
 /// only `VAL_CONF`, below its own threshold).
@@ -63,20 +68,21 @@ pub fn to_coco(
     }
 }
 
-/// Runs `model` on the real images `ids`.
+/// Runs `model` on the real images `ids`, letterboxed to its `input` size.
 pub fn predict_ids(
     model: &Detector,
     set: &RealSet,
     ids: &[u64],
+    input: usize,
     device: &Device,
 ) -> Result<Vec<Detection>> {
-    let size = set.size as usize;
+    let size = input;
     let mut dets = Vec::new();
     for chunk in ids.chunks(EVAL_BATCH) {
         let mut px = Vec::with_capacity(chunk.len() * 3 * size * size);
         let mut origs = Vec::new();
         for &id in chunk {
-            let (img, orig) = set.image(id)?;
+            let (img, orig) = set.image(id, size as u32)?;
             push_planes(&img, &mut px);
             origs.push(orig);
         }
@@ -85,7 +91,7 @@ pub fn predict_ids(
         for ((&id, orig), per) in chunk.iter().zip(&origs).zip(&raw) {
             dets.extend(
                 per.iter()
-                    .map(|d| to_coco(d, id, &set.cat_ids, set.size, *orig)),
+                    .map(|d| to_coco(d, id, &set.cat_ids, size as u32, *orig)),
             );
         }
     }
@@ -103,14 +109,15 @@ pub fn gt_subset(gt: &CocoDataset, ids: &[u64]) -> CocoDataset {
     g
 }
 
-/// bbox and segm COCO stats of `model` on the real images `ids`.
+/// bbox and segm COCO stats of `model` (input size `input`) on the real images `ids`.
 pub fn evaluate_ids(
     model: &Detector,
     set: &RealSet,
     ids: &[u64],
+    input: usize,
     device: &Device,
 ) -> Result<(Stats, Vec<Detection>)> {
-    let dets = predict_ids(model, set, ids, device)?;
+    let dets = predict_ids(model, set, ids, input, device)?;
     let gt = gt_subset(&set.gt, ids);
     let bbox = evaluate(&gt, &dets, IouType::Bbox).context("bbox evaluation")?;
     let segm = evaluate(&gt, &dets, IouType::Segm).context("segm evaluation")?;
@@ -121,4 +128,84 @@ pub fn evaluate_ids(
         },
         dets,
     ))
+}
+
+/// Which split of a real set to score.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SplitName {
+    Train,
+    Val,
+    Test,
+}
+
+/// A checkpoint scored on a split.
+#[derive(Clone, Debug)]
+pub struct Score {
+    pub stats: Stats,
+    /// Epochs the checkpoint had completed.
+    pub epoch: usize,
+    pub images: usize,
+    /// True when the scored images are proxy-real renders.
+    pub proxy: bool,
+    /// Where the images came from, for messages.
+    pub origin: String,
+}
+
+/// Scores `checkpoint`'s weights on `split` of the data it was trained with, rebuilt from
+/// its header; with `data`, on the real set of that config instead (e.g. your photos),
+/// split by its `data.split` and seed (`[0, 0]`: every image is test) and letterboxed
+/// to the checkpoint's input size.
+pub fn score_checkpoint(
+    checkpoint: &Path,
+    split: SplitName,
+    data: Option<&str>,
+    device: Option<DeviceKind>,
+) -> Result<Score> {
+    let ck = Checkpoint::load(checkpoint)?;
+    let dev = device_of(device.unwrap_or(ck.header.config.device));
+    let (real, split_ids, origin) = match data {
+        None => {
+            let cfg = &ck.header.config;
+            let real = RealSet::load(&cfg.data, cfg.seed)
+                .with_context(|| format!("rebuilding the data of {}", checkpoint.display()))?;
+            (
+                real,
+                ck.header.split.clone(),
+                checkpoint.display().to_string(),
+            )
+        }
+        Some(name) => {
+            let cfg = config::load(name, &[])?;
+            let real = RealSet::load(&cfg.data, cfg.seed)?;
+            let split = Split::new(&real.ids(), cfg.data.split, cfg.seed)?;
+            (real, split, format!("the data of {name}"))
+        }
+    };
+    if real.cat_ids != ck.header.category_ids {
+        bail!(
+            "the categories of {origin} {:?} differ from the checkpoint's {:?}",
+            real.cat_ids,
+            ck.header.category_ids
+        );
+    }
+    let ids = match split {
+        SplitName::Train => &split_ids.train,
+        SplitName::Val => &split_ids.val,
+        SplitName::Test => &split_ids.test,
+    };
+    if ids.is_empty() {
+        bail!("the {split:?} split of {origin} is empty");
+    }
+    let model = ck
+        .model("ema", &dev)
+        .with_context(|| format!("in checkpoint {}", checkpoint.display()))?;
+    let input = ck.header.model.input_size();
+    let (stats, _) = evaluate_ids(&model, &real, ids, input, &dev)?;
+    Ok(Score {
+        stats,
+        epoch: ck.header.epoch,
+        images: ids.len(),
+        proxy: real.proxy,
+        origin,
+    })
 }

@@ -1,29 +1,21 @@
-//! Training: the loop ([`trainer`]) over the trainable models ([`detector`]), learning-rate schedule ([`schedule`]), optimisers and
-//! global-norm clipping ([`optim`]), weight EMA ([`ema`]), checkpoint files
-//! ([`checkpoint`]), per-epoch COCO evaluation ([`evaluate`]), plots ([`plot`]) and
-//! progress bars ([`progress`]). The commands built on it (`train`, `eval`, `predict`)
-//! live in [`commands`].
+//! Training: the run ([`trainer`]: prepare, data, state, epochs, checkpoints, test) over
+//! the trainable models ([`detector`]), fed by [`loader`]; learning-rate schedule
+//! ([`schedule`]), optimisers and global-norm clipping ([`optim`]), weight EMA ([`ema`]),
+//! divergence stop ([`divergence`]), checkpoint files ([`checkpoint`]), the run folder's
+//! other files ([`run_files`]), per-epoch COCO evaluation ([`evaluate`]) and plots
+//! ([`plot`]). The commands built on it live in [`crate::commands`].
 
 pub mod checkpoint;
-pub mod commands;
 pub mod detector;
+pub mod device;
 pub mod divergence;
 pub mod ema;
 pub mod evaluate;
 pub mod interrupt;
+pub mod loader;
 pub mod optim;
 pub mod plot;
-pub mod progress;
+pub mod run_files;
 pub mod schedule;
+pub mod smoke;
 pub mod trainer;
-
-use burn::tensor::Tensor;
-
-/// First element of a tensor as f32 (syncs the device).
-pub fn scalar<const D: usize>(t: &Tensor<D>) -> f32 {
-    t.clone()
-        .into_data_as::<f32>()
-        .try_into_vec::<f32>()
-        .map(|v| v.first().copied().unwrap_or(f32::NAN))
-        .unwrap_or(f32::NAN)
-}

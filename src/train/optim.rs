@@ -93,7 +93,7 @@ pub fn grad_norm<M: Module>(module: &M, grads: &GradientsParams) -> f64 {
     let mut v = SumSquares { grads, acc: None };
     module.visit(&mut v);
     match v.acc {
-        Some(t) => (crate::train::scalar(&t) as f64).sqrt(),
+        Some(t) => (crate::util::tensor::scalar(&t) as f64).sqrt(),
         None => 0.0,
     }
 }

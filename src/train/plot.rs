@@ -9,19 +9,21 @@ use anyhow::Result;
 
 use crate::eval::plots::{write_png, Panel, Series, PALETTE};
 
+use super::run_files::EpochRecord;
+
 /// The panels of a run's plot from its per-epoch metric records.
-pub fn run_panels(records: &[serde_json::Value], loss_names: &[&str]) -> [Panel; 2] {
-    let curve = |f: &dyn Fn(&serde_json::Value) -> Option<f64>| -> Vec<(f64, f64)> {
+pub fn run_panels(records: &[EpochRecord], loss_names: &[&str]) -> [Panel; 2] {
+    let curve = |f: &dyn Fn(&EpochRecord) -> Option<f64>| -> Vec<(f64, f64)> {
         records
             .iter()
-            .filter_map(|r| Some((r["epoch"].as_f64()?, f(r)?)))
+            .filter_map(|r| Some((r.epoch as f64, f(r)?)))
             .collect()
     };
     let mut losses = Panel::new("training losses", "epoch", "loss (mean per step)");
     for (i, &k) in loss_names.iter().enumerate() {
         losses = losses.push(Series::new(
             k,
-            curve(&|r| r["loss"][k].as_f64()),
+            curve(&|r| r.loss.get(k).copied()),
             PALETTE[i % 6],
         ));
     }
@@ -37,7 +39,14 @@ pub fn run_panels(records: &[serde_json::Value], loss_names: &[&str]) -> [Panel;
     {
         ap = ap.push(Series::new(
             name,
-            curve(&|r| r["val"][t]["stats"][s].as_f64()),
+            curve(&|r| {
+                let v = if t == "bbox" {
+                    &r.val.bbox
+                } else {
+                    &r.val.segm
+                };
+                Some(v.stats[s])
+            }),
             PALETTE[6 + i],
         ));
     }
@@ -46,7 +55,7 @@ pub fn run_panels(records: &[serde_json::Value], loss_names: &[&str]) -> [Panel;
 
 /// Writes `<dir>/plots.png` from the per-epoch metric records (`loss.<name>` for each of
 /// `loss_names`).
-pub fn write_plots(dir: &Path, records: &[serde_json::Value], loss_names: &[&str]) -> Result<()> {
+pub fn write_plots(dir: &Path, records: &[EpochRecord], loss_names: &[&str]) -> Result<()> {
     write_png(
         &dir.join("plots.png"),
         &run_panels(records, loss_names),
@@ -59,13 +68,36 @@ pub fn write_plots(dir: &Path, records: &[serde_json::Value], loss_names: &[&str
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::train::run_files::{IouStats, StatsRecord};
 
     #[test]
     fn run_plot_has_every_curve() {
-        let recs: Vec<serde_json::Value> = (1..=3)
+        let recs: Vec<EpochRecord> = (1..=3)
             .map(|e| {
-                serde_json::json!({"epoch": e, "loss": {"box": 1.0 / e as f64, "cls": 2.0, "dfl": 1.5, "seg": 3.0},
-                    "val": {"bbox": {"stats": [0.1 * e as f64, 0.2, 0.0]}, "segm": {"stats": [0.05, 0.1, 0.0]}}})
+                let mut bbox = [0.0; 12];
+                bbox[..2].copy_from_slice(&[0.1 * e as f64, 0.2]);
+                let mut segm = [0.0; 12];
+                segm[..2].copy_from_slice(&[0.05, 0.1]);
+                EpochRecord {
+                    epoch: e,
+                    images_per_s: 1.0,
+                    loss: [
+                        ("box", 1.0 / e as f64),
+                        ("cls", 2.0),
+                        ("dfl", 1.5),
+                        ("seg", 3.0),
+                    ]
+                    .map(|(k, v)| (k.to_string(), v))
+                    .into(),
+                    lr: 0.01,
+                    proxy: true,
+                    time: 1.0,
+                    train_time: 1.0,
+                    val: StatsRecord {
+                        bbox: IouStats { stats: bbox },
+                        segm: IouStats { stats: segm },
+                    },
+                }
             })
             .collect();
         let names = ["box", "cls", "dfl", "seg"];

@@ -1,45 +1,39 @@
-//! The training loop: data → epochs of steps → per-epoch COCO evaluation → checkpoints
-//! and run files → test evaluation of the best checkpoint.
+//! The training run: prepare the run folder (and what `--resume` continues from), load
+//! the data, build or restore the model state, then epochs of steps → per-epoch COCO
+//! evaluation → checkpoints and run files → the test evaluation of the best checkpoint.
 //!
 //! Run directory (`runs/<name>/` or `--run-dir`): `config.toml` (resolved), `split.json`,
 //! `metrics.jsonl` (one object per epoch), `results.csv`, `best.bpk`, `last.bpk`,
-//! `test.json`, and `plots.png` when plotting is built in. Every file is written
-//! atomically. A diverging run (non-finite or exploding loss, see [`super::divergence`])
-//! stops with an error naming the epoch, step and loss term; `last.bpk` then still holds
-//! the last good epoch.
-//!
-//! Batches are built on a loader thread (rendering, decoding and augmenting the next
-//! batch in parallel with rayon) while the current step runs; each item's augmentation
-//! RNG is keyed by (seed, epoch, position), so a run does not depend on thread timing.
+//! `test.json`, and `plots.png`; their formats live in [`super::run_files`]. Every file
+//! is written atomically. A diverging run (non-finite or exploding loss, see
+//! [`super::divergence`]) stops with an error naming the epoch, step and loss term;
+//! `last.bpk` then still holds the last good epoch.
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::sync_channel;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use burn::module::Module;
-use burn::optim::GradientsParams;
+use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
-use rand::seq::SliceRandom;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
-use serde_json::json;
 
-use crate::config::{Config, DeviceKind, ModelKind};
-use crate::data::augment::{augment, AugmentConfig};
-use crate::data::batch::{collate, Batch};
-use crate::data::dataset::{RealSet, Sample, SyntheticSet};
-use crate::data::split::Split;
-use crate::util::write_atomic;
+use crate::annotations::split::Split;
+use crate::config::{Config, DeviceKind};
+use crate::data::augment::AugmentConfig;
+use crate::data::dataset::{RealSet, SyntheticSet};
 
 use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header, Stats, FORMAT};
 use super::detector::{Detector, DetectorConfig};
+use super::device::device_of;
 use super::divergence::{check_weights, At, DivergenceGuard};
 use super::ema::Ema;
 use super::evaluate::evaluate_ids;
+use super::loader::{epoch_plan, mix, Loader};
+use super::run_files::{self, EpochRecord, StatsRecord, TestRecord};
 use super::schedule::step_lr;
-use super::{optim, progress};
+use super::smoke::smoke_config;
+use super::{optim, plot};
+use crate::util::progress;
 
 /// How to run (everything that is not in the config file).
 #[derive(Clone, Debug, Default)]
@@ -69,175 +63,13 @@ pub struct TrainSummary {
     pub train_images_per_s: f64,
 }
 
-/// `--smoke`: any config shrunk to about a minute that still goes through every stage:
-/// 64 px images (no crop), at most 9 real and 4 synthetic images, 2 epochs, batch 4.
-/// A Mask R-CNN keeps its depth (so the R101 code paths run) but gets quarter widths,
-/// anchors sized for 64 px and a few dozen proposals and RoIs.
-pub fn smoke_config(cfg: &mut Config) {
-    cfg.name = format!("{}_smoke", cfg.name);
-    let d = &mut cfg.data;
-    d.image_size = 64;
-    d.crop = 64;
-    d.real.count = d.real.count.min(9);
-    d.real.limit = Some(d.real.limit.unwrap_or(9).min(9));
-    d.synthetic = d.synthetic.min(4);
-    let t = &mut cfg.train;
-    t.epochs = t.epochs.min(2);
-    t.batch = t.batch.min(4);
-    t.warmup_epochs = t.warmup_epochs.min(1.0);
-    t.warmup_iters = t.warmup_iters.min(2);
-    t.milestones.retain(|&m| m < t.epochs);
-    let m = &mut cfg.model;
-    if m.kind == ModelKind::Maskrcnn {
-        m.width_mult = m.width_mult.min(0.25);
-        m.fpn_channels = Some(32);
-        m.anchor_sizes = Some(vec![12.0, 24.0, 48.0, 96.0, 192.0]);
-        m.rpn_batch = Some(64);
-        m.rpn_pre_nms_topk_train = Some(200);
-        m.rpn_post_nms_topk_train = Some(50);
-        m.rpn_pre_nms_topk_test = Some(200);
-        m.rpn_post_nms_topk_test = Some(50);
-        m.roi_batch = Some(32);
-        m.box_fc_dim = Some(64);
-        m.mask_conv_dim = Some(32);
-    }
-}
-
-/// The Burn device of a kind.
-#[allow(deprecated)] // Device::ndarray: the trainer must still run there.
-pub fn device_of(kind: DeviceKind) -> Device {
-    match kind {
-        DeviceKind::Flex => Device::flex(),
-        DeviceKind::Ndarray => Device::ndarray(),
-    }
-}
-
 /// The model config of a run config with `nc` classes.
 pub fn model_config(cfg: &Config, nc: usize) -> Result<DetectorConfig> {
     DetectorConfig::from_config(cfg, nc)
 }
 
-/// One item of an epoch: a real image id or a synthetic index.
-#[derive(Clone, Copy, Debug)]
-enum Item {
-    Real(u64),
-    Synthetic(u64),
-}
-
-fn mix(a: u64, b: u64) -> u64 {
-    crate::render::noise::mix64(
-        a ^ crate::render::noise::mix64(b.wrapping_add(0x9E37_79B9_7F4A_7C15)),
-    )
-}
-
-/// Shuffled items of `epoch`.
-fn epoch_plan(train_ids: &[u64], synthetic: usize, seed: u64, epoch: usize) -> Vec<Item> {
-    let mut items: Vec<Item> = train_ids.iter().map(|&i| Item::Real(i)).collect();
-    items.extend((0..synthetic as u64).map(Item::Synthetic));
-    items.shuffle(&mut ChaCha8Rng::seed_from_u64(mix(seed, epoch as u64)));
-    items
-}
-
-struct Data {
-    real: RealSet,
-    synthetic: SyntheticSet,
-    aug: AugmentConfig,
-    seed: u64,
-}
-
-impl Data {
-    fn batch(&self, items: &[Item], epoch: usize, first_pos: usize) -> Result<Batch> {
-        let samples: Result<Vec<Sample>> = items
-            .par_iter()
-            .enumerate()
-            .map(|(k, it)| {
-                let s = match *it {
-                    Item::Real(id) => self.real.sample(id)?,
-                    Item::Synthetic(i) => self.synthetic.sample(i, epoch as u64)?,
-                };
-                let key = mix(mix(self.seed, epoch as u64), (first_pos + k) as u64);
-                Ok(augment(&s, &self.aug, &mut ChaCha8Rng::seed_from_u64(key)))
-            })
-            .collect();
-        collate(&samples?)
-    }
-}
-
-fn stats_json(s: &Stats) -> serde_json::Value {
-    json!({"bbox": {"stats": s.bbox}, "segm": {"stats": s.segm}})
-}
-
-const STAT_NAMES: [&str; 12] = [
-    "AP", "AP50", "AP75", "APs", "APm", "APl", "AR1", "AR10", "AR100", "ARs", "ARm", "ARl",
-];
-
-fn csv_header(loss_names: &[&str]) -> String {
-    let mut h = vec!["epoch".to_string(), "lr".into(), "time".into()];
-    h.extend(loss_names.iter().map(|s| format!("train/{s}_loss")));
-    for t in ["bbox", "segm"] {
-        h.extend(STAT_NAMES.iter().map(|n| format!("val/{t}_{n}")));
-    }
-    h.join(",")
-}
-
-fn csv_row(m: &serde_json::Value, loss_names: &[&str]) -> String {
-    let mut r = vec![
-        m["epoch"].to_string(),
-        m["lr"].to_string(),
-        m["time"].to_string(),
-    ];
-    for k in loss_names {
-        r.push(m["loss"][k].to_string());
-    }
-    for t in ["bbox", "segm"] {
-        if let Some(a) = m["val"][t]["stats"].as_array() {
-            r.extend(a.iter().map(|v| v.to_string()));
-        }
-    }
-    r.join(",")
-}
-
-/// Writes `metrics.jsonl` and `results.csv` from the per-epoch records.
-fn write_metrics(dir: &Path, records: &[serde_json::Value], loss_names: &[&str]) -> Result<()> {
-    let mut jl = String::new();
-    let mut csv = csv_header(loss_names) + "\n";
-    for r in records {
-        jl.push_str(&serde_json::to_string(r)?);
-        jl.push('\n');
-        csv.push_str(&csv_row(r, loss_names));
-        csv.push('\n');
-    }
-    write_atomic(&dir.join("metrics.jsonl"), jl.as_bytes())?;
-    write_atomic(&dir.join("results.csv"), csv.as_bytes())?;
-    Ok(())
-}
-
-fn read_metrics(dir: &Path, upto_epoch: usize) -> Result<Vec<serde_json::Value>> {
-    let p = dir.join("metrics.jsonl");
-    let Ok(text) = std::fs::read_to_string(&p) else {
-        return Ok(Vec::new());
-    };
-    let mut out = Vec::new();
-    for (i, line) in text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-    {
-        let v: serde_json::Value = serde_json::from_str(line)
-            .with_context(|| format!("{} line {} is not JSON", p.display(), i + 1))?;
-        if v["epoch"]
-            .as_u64()
-            .is_some_and(|e| e as usize <= upto_epoch)
-        {
-            out.push(v);
-        }
-    }
-    Ok(out)
-}
-
-/// Trains `cfg` (already validated) and returns the test metrics of the best checkpoint.
-pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
-    let t_start = Instant::now();
+/// The config as it will run (`--smoke`, `--device` applied) and its run folder, created.
+fn prepare_run(mut cfg: Config, opts: &TrainOptions) -> Result<(Config, PathBuf)> {
     if opts.smoke {
         smoke_config(&mut cfg);
         cfg.validate().context("smoke config")?;
@@ -251,56 +83,45 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         .unwrap_or_else(|| PathBuf::from("runs").join(&cfg.name));
     std::fs::create_dir_all(&run_dir)
         .with_context(|| format!("cannot create run folder {}", run_dir.display()))?;
-    let say = |s: String| {
-        if !opts.quiet {
-            eprintln!("{s}");
-        }
-    };
+    Ok((cfg, run_dir))
+}
 
-    let resume = if opts.resume {
-        let p = run_dir.join("last.bpk");
-        if !p.exists() {
-            bail!(
-                "--resume: {} does not exist (nothing to resume)",
-                p.display()
-            );
+/// `--resume`: `<run_dir>/last.bpk`, checked against `cfg` before anything is written.
+fn resume_point(cfg: &Config, run_dir: &Path) -> Result<Checkpoint> {
+    let p = run_dir.join("last.bpk");
+    if !p.exists() {
+        bail!(
+            "--resume: {} does not exist (nothing to resume)",
+            p.display()
+        );
+    }
+    let ck = Checkpoint::load(&p)?;
+    if ck.header.model.kind() != cfg.model.kind() {
+        let probe = DetectorConfig::from_config(cfg, ck.header.model.num_classes())?;
+        if let Some(why) = probe.mismatch(&ck.header.model) {
+            bail!("--resume: cannot continue from {}: {why}", p.display());
         }
-        let ck = Checkpoint::load(&p)?;
-        if ck.header.model.kind() != cfg.model.kind {
-            // Checked before anything is written to the run folder.
-            let probe = DetectorConfig::from_config(&cfg, ck.header.model.num_classes())?;
-            if let Some(why) = probe.mismatch(&ck.header.model) {
-                bail!("--resume: cannot continue from {}: {why}", p.display());
-            }
-        }
-        if ck.header.epoch >= cfg.train.epochs {
-            bail!(
-                "--resume: {} already completed {} of {} epochs (raise train.epochs with --set to train longer)",
-                p.display(),
-                ck.header.epoch,
-                cfg.train.epochs
-            );
-        }
-        Some(ck)
-    } else {
-        None
-    };
+    }
+    if ck.header.epoch >= cfg.train.epochs {
+        bail!(
+            "--resume: {} already completed {} of {} epochs (raise train.epochs with --set to train longer)",
+            p.display(),
+            ck.header.epoch,
+            cfg.train.epochs
+        );
+    }
+    Ok(ck)
+}
 
-    let text = format!(
-        "# chicktrain resolved config (schema 1){}\n{}",
-        if cfg.data.real.kind == crate::config::RealKind::Proxy {
-            "; data.real is the proxy-real render preset, a stand-in for real photos"
-        } else {
-            ""
-        },
-        toml::to_string(&cfg)?
-    );
-    write_atomic(&run_dir.join("config.toml"), text.as_bytes())?;
-
-    // Data.
-    let t0 = Instant::now();
+/// The real set, its split (the resumed run's, or a new seeded one, saved to the run
+/// folder) and the synthetic set, rendered into the cache.
+fn load_data(
+    cfg: &Config,
+    run_dir: &Path,
+    resume: Option<&Checkpoint>,
+) -> Result<(RealSet, Split, SyntheticSet)> {
     let real = RealSet::load(&cfg.data, cfg.seed)?;
-    let split = match &resume {
+    let split = match resume {
         Some(ck) => ck.header.split.clone(),
         None => Split::new(&real.ids(), cfg.data.split, cfg.seed)?,
     };
@@ -316,6 +137,285 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
     split.save(&run_dir.join("split.json"))?;
     let synthetic = SyntheticSet::new(&cfg.data, cfg.seed);
     synthetic.prepare()?;
+    Ok((real, split, synthetic))
+}
+
+/// Weights, EMA and optimiser of a run, and how far it got.
+struct TrainState {
+    model: Detector,
+    ema: Ema<Detector>,
+    optim: ModuleOptimizer,
+    /// Epochs completed.
+    epoch: usize,
+    best_fitness: f64,
+    best_epoch: usize,
+    records: Vec<EpochRecord>,
+}
+
+impl TrainState {
+    /// A new model of `mcfg` on the autodiff device `ad`, or the state of `resume`.
+    fn new(
+        cfg: &Config,
+        mcfg: &DetectorConfig,
+        resume: Option<&Checkpoint>,
+        run_dir: &Path,
+        ad: &Device,
+        base: &Device,
+    ) -> Result<TrainState> {
+        let optim = optim::build(&cfg.train);
+        let Some(ck) = resume else {
+            let model = mcfg.init(ad);
+            let ema = Ema::new(&model, 0);
+            return Ok(TrainState {
+                model,
+                ema,
+                optim,
+                epoch: 0,
+                best_fitness: f64::NEG_INFINITY,
+                best_epoch: 0,
+                records: Vec::new(),
+            });
+        };
+        let last = run_dir.join("last.bpk");
+        if let Some(why) = mcfg.mismatch(&ck.header.model) {
+            bail!("--resume: cannot continue from {}: {why}", last.display());
+        }
+        let in_last = || format!("--resume: in {}", last.display());
+        let model = ck.model("model", ad).with_context(in_last)?;
+        let ema = Ema {
+            model: ck.model("ema", base).with_context(in_last)?,
+            updates: ck.header.ema_updates,
+        };
+        let optim = ck.optimizer(optim).with_context(in_last)?;
+        let records = run_files::read_metrics(run_dir, ck.header.epoch)?;
+        Ok(TrainState {
+            model,
+            ema,
+            optim,
+            epoch: ck.header.epoch,
+            best_fitness: ck.header.best_fitness,
+            best_epoch: run_files::best_epoch(&records),
+            records,
+        })
+    }
+
+    /// The weights evaluated and shipped: the EMA copy, or the model with EMA off.
+    fn eval_model(&self, ema: bool) -> Detector {
+        if ema {
+            self.ema.model.clone()
+        } else {
+            self.model.valid()
+        }
+    }
+
+    /// `last.bpk`: the evaluated weights as `ema`, plus the raw weights and optimiser
+    /// state for `--resume`.
+    fn last_checkpoint(&self, header: Header, eval_bytes: Vec<u8>) -> Result<Checkpoint> {
+        Ok(Checkpoint {
+            header,
+            sections: vec![
+                ("ema".into(), eval_bytes),
+                ("model".into(), module_bytes(&self.model)?),
+                ("optim".into(), optim_bytes(&self.optim)?),
+            ],
+        })
+    }
+}
+
+/// What a run keeps fixed across epochs: the config, the data and the model config, and
+/// the checkpoint header they make.
+struct Run<'a> {
+    cfg: &'a Config,
+    run_dir: &'a Path,
+    real: &'a RealSet,
+    split: &'a Split,
+    mcfg: &'a DetectorConfig,
+    class_names: Vec<String>,
+}
+
+impl Run<'_> {
+    fn header(&self, st: &TrainState, epoch: usize, val: Option<Stats>) -> Header {
+        Header {
+            format: FORMAT,
+            chicktrain: env!("CARGO_PKG_VERSION").into(),
+            model: self.mcfg.clone(),
+            category_ids: self.real.cat_ids.clone(),
+            class_names: self.class_names.clone(),
+            config: self.cfg.clone(),
+            split: self.split.clone(),
+            proxy: self.real.proxy,
+            epoch,
+            ema_updates: st.ema.updates,
+            best_fitness: st.best_fitness,
+            val,
+        }
+    }
+}
+
+/// The steps of one epoch, as far as they got.
+struct EpochSteps {
+    /// Sum over steps of each loss term.
+    sums: Vec<f64>,
+    last_lr: f64,
+    steps: usize,
+    images: usize,
+    /// Steps done when Ctrl-C stopped the epoch.
+    interrupted: Option<usize>,
+}
+
+/// Runs the optimiser steps of `epoch` over `loader`'s batches.
+#[allow(clippy::too_many_arguments)]
+fn run_epoch(
+    cfg: &Config,
+    st: &mut TrainState,
+    loader: &Loader,
+    guard: &mut DivergenceGuard,
+    train_ids: &[u64],
+    epoch: usize,
+    ad: &Device,
+    quiet: bool,
+) -> Result<EpochSteps> {
+    let te = Instant::now();
+    let bsz = cfg.train.batch;
+    let per_epoch = (train_ids.len() + cfg.data.synthetic).div_ceil(bsz);
+    let plan = epoch_plan(train_ids, cfg.data.synthetic, cfg.seed, epoch);
+    let bar = if quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        progress::bar(
+            per_epoch as u64,
+            &format!("{}/{}", epoch + 1, cfg.train.epochs),
+        )
+    };
+    let n_terms = st.model.loss_names().len();
+    let mut out = EpochSteps {
+        sums: vec![0f64; n_terms],
+        last_lr: 0.0,
+        steps: 0,
+        images: 0,
+        interrupted: None,
+    };
+    let result: Result<()> = std::thread::scope(|sc| {
+        let rx = loader.spawn(sc, &plan, bsz, epoch);
+        for (step, batch) in rx.iter().enumerate() {
+            let batch = batch
+                .with_context(|| format!("building batch {} of epoch {}", step + 1, epoch + 1))?;
+            let n = batch.dims[0];
+            let x = Tensor::<4>::from_data(TensorData::new(batch.pixels, batch.dims), ad);
+            let loss = st.model.loss(
+                x,
+                &batch.targets,
+                mix(mix(cfg.seed ^ 0x5A3D, epoch as u64), step as u64),
+            );
+            let mut v = loss.terms.clone();
+            v.push(loss.total_value);
+            let at = At {
+                epoch,
+                step,
+                per_epoch,
+            };
+            guard.check_step(at, &v)?;
+            let mut grads = GradientsParams::from_grads(loss.total.backward(), &st.model);
+            let norm = optim::clip_global_norm(&st.model, &mut grads, cfg.train.grad_clip)?;
+            guard.check_grad_norm(at, norm)?;
+            let (rates, lr) = step_lr(&cfg.train, epoch, step, per_epoch);
+            st.model = st.optim.step(rates, st.model.clone(), grads);
+            if cfg.train.ema {
+                st.ema.update(&st.model);
+            }
+            for (s, t) in out.sums.iter_mut().zip(&loss.terms) {
+                *s += *t as f64;
+            }
+            out.last_lr = lr;
+            out.steps += 1;
+            out.images += n;
+            let el = te.elapsed().as_secs_f64();
+            bar.set_message(format!(
+                "loss {:.3} {:.2} img/s",
+                loss.total_value / n as f32,
+                (out.steps * bsz) as f64 / el.max(1e-9)
+            ));
+            bar.inc(1);
+            if super::interrupt::requested() {
+                out.interrupted = Some(step + 1);
+                break;
+            }
+        }
+        Ok(())
+    });
+    bar.finish_and_clear();
+    result?;
+    Ok(out)
+}
+
+/// The epoch's record from its steps and validation stats.
+fn epoch_record(
+    epoch: usize,
+    steps: &EpochSteps,
+    loss_names: &[&str],
+    secs: f64,
+    t_train: f64,
+    images_per_s: f64,
+    val: &Stats,
+    proxy: bool,
+) -> EpochRecord {
+    let n = steps.steps.max(1) as f64;
+    EpochRecord {
+        epoch: epoch + 1,
+        images_per_s,
+        loss: loss_names
+            .iter()
+            .zip(&steps.sums)
+            .map(|(k, s)| (k.to_string(), s / n))
+            .collect(),
+        lr: steps.last_lr,
+        proxy,
+        time: secs,
+        train_time: t_train,
+        val: StatsRecord::from(val),
+    }
+}
+
+/// The line printed after an epoch.
+fn epoch_line(rec: &EpochRecord, epochs: usize, loss_names: &[&str], improved: bool) -> String {
+    let (b, s) = (&rec.val.bbox.stats, &rec.val.segm.stats);
+    format!(
+        "epoch {}/{}  lr {:.2e}  loss {}  {:.1} s ({:.2} img/s)  val bbox AP {:.3} AP50 {:.3}  segm AP {:.3} AP50 {:.3}{}",
+        rec.epoch,
+        epochs,
+        rec.lr,
+        loss_names
+            .iter()
+            .map(|k| format!("{k} {:.3}", rec.loss[*k]))
+            .collect::<Vec<_>>()
+            .join(" "),
+        rec.time,
+        rec.images_per_s,
+        b[0],
+        b[1],
+        s[0],
+        s[1],
+        if improved { "  *best" } else { "" }
+    )
+}
+
+/// Trains `cfg` (already validated) and returns the test metrics of the best checkpoint.
+pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
+    let t_start = Instant::now();
+    let (cfg, run_dir) = prepare_run(cfg, opts)?;
+    let say = |s: String| {
+        if !opts.quiet {
+            eprintln!("{s}");
+        }
+    };
+    let resume = opts
+        .resume
+        .then(|| resume_point(&cfg, &run_dir))
+        .transpose()?;
+    run_files::write_config(&run_dir, &cfg)?;
+
+    let t0 = Instant::now();
+    let (real, split, synthetic) = load_data(&cfg, &run_dir, resume.as_ref())?;
     say(format!(
         "data: {} real images{} ({} train / {} val / {} test), {} synthetic{}, {} px (crop {}), ready in {:.1} s",
         real.gt.images.len(),
@@ -330,46 +430,31 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         t0.elapsed().as_secs_f64()
     ));
 
-    // Model, optimiser, EMA.
     let base = device_of(cfg.device);
     base.seed(cfg.seed);
     let ad = base.clone().autodiff();
     let mcfg = model_config(&cfg, real.num_classes())?;
-    let mut optim = optim::build(&cfg.train);
-    let (mut model, mut ema, start_epoch, mut best_fitness, mut records) = match &resume {
-        Some(ck) => {
-            if let Some(why) = mcfg.mismatch(&ck.header.model) {
-                bail!(
-                    "--resume: cannot continue from {}: {why}",
-                    run_dir.join("last.bpk").display()
-                );
-            }
-            let in_last = || format!("--resume: in {}", run_dir.join("last.bpk").display());
-            let model = ck.model("model", &ad).with_context(in_last)?;
-            let ema = Ema {
-                model: ck.model("ema", &base).with_context(in_last)?,
-                updates: ck.header.ema_updates,
-            };
-            optim = ck.optimizer(optim).with_context(in_last)?;
-            let recs = read_metrics(&run_dir, ck.header.epoch)?;
-            say(format!("resuming after epoch {}", ck.header.epoch));
-            (model, ema, ck.header.epoch, ck.header.best_fitness, recs)
-        }
-        None => {
-            let model = mcfg.init(&ad);
-            let ema = Ema::new(&model, 0);
-            (model, ema, 0, f64::NEG_INFINITY, Vec::new())
-        }
-    };
+    let input = mcfg.input_size();
+    let mut st = TrainState::new(&cfg, &mcfg, resume.as_ref(), &run_dir, &ad, &base)?;
+    if resume.is_some() {
+        say(format!("resuming after epoch {}", st.epoch));
+    }
     say(format!(
         "model: {}: {} on {:?}",
         mcfg.describe(),
-        model.summary(cfg.data.image_size as usize),
+        st.model.summary(input),
         cfg.device
     ));
-    let loss_names = model.loss_names();
-
-    let data = Data {
+    let loss_names = st.model.loss_names();
+    let run = Run {
+        cfg: &cfg,
+        run_dir: &run_dir,
+        real: &real,
+        split: &split,
+        mcfg: &mcfg,
+        class_names: real.class_names(),
+    };
+    let loader = Loader {
         real: real.clone(),
         synthetic,
         aug: AugmentConfig {
@@ -377,136 +462,33 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             fliplr: cfg.train.fliplr,
             hsv: cfg.train.hsv,
         },
+        input: input as u32,
         seed: cfg.seed,
     };
     let n_items = split.train.len() + cfg.data.synthetic;
-    let bsz = cfg.train.batch;
-    let per_epoch = n_items.div_ceil(bsz);
-    let class_names = real.class_names();
-    let header_for = |epoch: usize, best: f64, updates: u64, val: Option<Stats>| Header {
-        format: FORMAT,
-        chicktrain: env!("CARGO_PKG_VERSION").into(),
-        model: mcfg.clone(),
-        category_ids: real.cat_ids.clone(),
-        class_names: class_names.clone(),
-        config: cfg.clone(),
-        split: split.clone(),
-        proxy: real.proxy,
-        epoch,
-        ema_updates: updates,
-        best_fitness: best,
-        val,
-    };
-
-    let mut best_epoch = resume.as_ref().map_or(0, |_| {
-        records
-            .iter()
-            .max_by(|a, b| {
-                let f =
-                    |v: &serde_json::Value| v["val"]["segm"]["stats"][0].as_f64().unwrap_or(-1.0);
-                f(a).total_cmp(&f(b))
-            })
-            .and_then(|r| r["epoch"].as_u64())
-            .unwrap_or(0) as usize
-    });
     let (mut train_imgs, mut train_secs) = (0usize, 0f64);
     let guard_names: Vec<&str> = loss_names.iter().copied().chain(["total"]).collect();
     let mut guard = DivergenceGuard::new(&guard_names);
-    for epoch in start_epoch..cfg.train.epochs {
+    for epoch in st.epoch..cfg.train.epochs {
         let te = Instant::now();
-        let plan = epoch_plan(&split.train, cfg.data.synthetic, cfg.seed, epoch);
-        let bar = if opts.quiet {
-            indicatif::ProgressBar::hidden()
-        } else {
-            progress::bar(
-                per_epoch as u64,
-                &format!("{}/{}", epoch + 1, cfg.train.epochs),
-            )
-        };
-        let mut sums = vec![0f64; loss_names.len()];
-        let mut last_lr = 0.0;
-        let mut seen = 0usize;
-        let mut interrupted: Option<usize> = None;
-        let step_result: Result<()> = std::thread::scope(|sc| {
-            let (tx, rx) = sync_channel::<Result<Batch>>(2);
-            let data = &data;
-            let plan = &plan;
-            sc.spawn(move || {
-                for (b, chunk) in plan.chunks(bsz).enumerate() {
-                    if tx.send(data.batch(chunk, epoch, b * bsz)).is_err() {
-                        return;
-                    }
-                }
-            });
-            for (step, batch) in rx.iter().enumerate() {
-                let batch = batch.with_context(|| {
-                    format!("building batch {} of epoch {}", step + 1, epoch + 1)
-                })?;
-                let n = batch.dims[0];
-                let x = Tensor::<4>::from_data(TensorData::new(batch.pixels, batch.dims), &ad);
-                let loss = model.loss(
-                    x,
-                    &batch.targets,
-                    mix(mix(cfg.seed ^ 0x5A3D, epoch as u64), step as u64),
-                );
-                let mut v = loss.terms.clone();
-                v.push(loss.total_value);
-                let at = At {
-                    epoch,
-                    step,
-                    per_epoch,
-                };
-                guard.check_step(at, &v)?;
-                let mut grads = GradientsParams::from_grads(loss.total.backward(), &model);
-                let norm = optim::clip_global_norm(&model, &mut grads, cfg.train.grad_clip)?;
-                guard.check_grad_norm(at, norm)?;
-                let (rates, lr) = step_lr(&cfg.train, epoch, step, per_epoch);
-                model = optim.step(rates, model.clone(), grads);
-                if cfg.train.ema {
-                    ema.update(&model);
-                }
-                for (s, t) in sums.iter_mut().zip(&loss.terms) {
-                    *s += *t as f64;
-                }
-                last_lr = lr;
-                seen += 1;
-                train_imgs += n;
-                let el = te.elapsed().as_secs_f64();
-                bar.set_message(format!(
-                    "loss {:.3} {:.2} img/s",
-                    loss.total_value / n as f32,
-                    (seen * bsz) as f64 / el.max(1e-9)
-                ));
-                bar.inc(1);
-                if super::interrupt::requested() {
-                    interrupted = Some(step + 1);
-                    break;
-                }
-            }
-            Ok(())
-        });
-        bar.finish_and_clear();
-        step_result?;
-        if let Some(step) = interrupted {
+        let steps = run_epoch(
+            &cfg,
+            &mut st,
+            &loader,
+            &mut guard,
+            &split.train,
+            epoch,
+            &ad,
+            opts.quiet,
+        )?;
+        train_imgs += steps.images;
+        if let Some(step) = steps.interrupted {
             // Completed epochs stay `epoch`: --resume redoes this one from its start, with
             // the weights, optimiser state and EMA as they are now.
             let p = run_dir.join("last.bpk");
-            Checkpoint {
-                header: header_for(epoch, best_fitness, ema.updates, None),
-                sections: vec![
-                    (
-                        "ema".into(),
-                        module_bytes(&if cfg.train.ema {
-                            ema.model.clone()
-                        } else {
-                            model.valid()
-                        })?,
-                    ),
-                    ("model".into(), module_bytes(&model)?),
-                    ("optim".into(), optim_bytes(&optim)?),
-                ],
-            }
-            .save(&p)?;
+            let eval_bytes = module_bytes(&st.eval_model(cfg.train.ema))?;
+            st.last_checkpoint(run.header(&st, epoch, None), eval_bytes)?
+                .save(&p)?;
             bail!(
                 "interrupted (Ctrl-C) at epoch {}, step {step}; saved {} — continue with the same command plus --resume",
                 epoch + 1,
@@ -515,105 +497,79 @@ pub fn train(mut cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         }
         let t_train = te.elapsed().as_secs_f64();
         train_secs += t_train;
-        check_weights(&model.valid(), "model", epoch)?;
+        check_weights(&st.model.valid(), "model", epoch)?;
         if cfg.train.ema {
-            check_weights(&ema.model, "EMA", epoch)?;
+            check_weights(&st.ema.model, "EMA", epoch)?;
         }
 
-        // Evaluate.
-        let eval_model: Detector = if cfg.train.ema {
-            ema.model.clone()
-        } else {
-            model.valid()
-        };
-        let (val, _) = evaluate_ids(&eval_model, &real, &split.val, &base)?;
-        let secs = te.elapsed().as_secs_f64();
-        let steps = seen.max(1) as f64;
-        let rec = json!({
-            "epoch": epoch + 1,
-            "lr": last_lr,
-            "loss": loss_names.iter().zip(&sums).map(|(k, s)| (k.to_string(), json!(s / steps))).collect::<serde_json::Map<_, _>>(),
-            "time": secs,
-            "train_time": t_train,
-            "images_per_s": (seen * bsz).min(n_items) as f64 / t_train.max(1e-9),
-            "val": stats_json(&val),
-            "proxy": real.proxy,
-        });
-        records.push(rec);
-        write_metrics(&run_dir, &records, loss_names)?;
+        let eval_model = st.eval_model(cfg.train.ema);
+        let (val, _) = evaluate_ids(&eval_model, &real, &split.val, input, &base)?;
+        let images_per_s = (steps.steps * cfg.train.batch).min(n_items) as f64 / t_train.max(1e-9);
+        let rec = epoch_record(
+            epoch,
+            &steps,
+            loss_names,
+            te.elapsed().as_secs_f64(),
+            t_train,
+            images_per_s,
+            &val,
+            real.proxy,
+        );
+        st.records.push(rec);
+        run_files::write_metrics(&run_dir, &st.records, loss_names)?;
 
-        // Checkpoints.
-        let fitness = val.segm[0];
-        let improved = fitness > best_fitness;
+        let improved = val.segm[0] > st.best_fitness;
         if improved {
-            best_fitness = fitness;
-            best_epoch = epoch + 1;
+            st.best_fitness = val.segm[0];
+            st.best_epoch = epoch + 1;
         }
-        let ema_bytes = module_bytes(&eval_model)?;
-        let header = header_for(epoch + 1, best_fitness, ema.updates, Some(val.clone()));
+        let eval_bytes = module_bytes(&eval_model)?;
+        let header = run.header(&st, epoch + 1, Some(val));
         if improved {
             Checkpoint {
                 header: header.clone(),
-                sections: vec![("ema".into(), ema_bytes.clone())],
+                sections: vec![("ema".into(), eval_bytes.clone())],
             }
             .save(&run_dir.join("best.bpk"))?;
         }
-        Checkpoint {
-            header,
-            sections: vec![
-                ("ema".into(), ema_bytes),
-                ("model".into(), module_bytes(&model)?),
-                ("optim".into(), optim_bytes(&optim)?),
-            ],
-        }
-        .save(&run_dir.join("last.bpk"))?;
-        say(format!(
-            "epoch {}/{}  lr {:.2e}  loss {}  {:.1} s ({:.2} img/s)  val bbox AP {:.3} AP50 {:.3}  segm AP {:.3} AP50 {:.3}{}",
-            epoch + 1,
-            cfg.train.epochs,
-            last_lr,
-            loss_names
-                .iter()
-                .zip(&sums)
-                .map(|(k, s)| format!("{k} {:.3}", s / steps))
-                .collect::<Vec<_>>()
-                .join(" "),
-            secs,
-            (seen * bsz).min(n_items) as f64 / t_train.max(1e-9),
-            val.bbox[0],
-            val.bbox[1],
-            val.segm[0],
-            val.segm[1],
-            if improved { "  *best" } else { "" }
-        ));
+        st.last_checkpoint(header, eval_bytes)?
+            .save(&run_dir.join("last.bpk"))?;
+        let rec = st.records.last().expect("pushed above");
+        say(epoch_line(rec, cfg.train.epochs, loss_names, improved));
     }
 
-    // Test evaluation of the best checkpoint.
-    let best = Checkpoint::load(&run_dir.join("best.bpk"))?;
-    let best_model = best.model("ema", &base)?;
-    let (test, _) = evaluate_ids(&best_model, &real, &split.test, &base)?;
-    let test_json = json!({
-        "checkpoint": "best.bpk",
-        "epoch": best.header.epoch,
-        "split": "test",
-        "images": split.test.len(),
-        "proxy": real.proxy,
-        "bbox": {"stats": test.bbox},
-        "segm": {"stats": test.segm},
-    });
-    write_atomic(
-        &run_dir.join("test.json"),
-        serde_json::to_string_pretty(&test_json)?.as_bytes(),
-    )?;
-    super::plot::write_plots(&run_dir, &records, loss_names)?;
+    let (test, best) = test_best(&run, &base)?;
+    plot::write_plots(&run_dir, &st.records, loss_names)?;
     Ok(TrainSummary {
-        run_dir,
+        run_dir: run_dir.clone(),
         epochs: cfg.train.epochs,
-        best_epoch: best.header.epoch.max(best_epoch),
+        best_epoch: best.max(st.best_epoch),
         test,
         test_images: split.test.len(),
         proxy: real.proxy,
         seconds: t_start.elapsed().as_secs_f64(),
         train_images_per_s: train_imgs as f64 / train_secs.max(1e-9),
     })
+}
+
+/// Scores `best.bpk` on the test split and writes `test.json`; returns the stats and the
+/// checkpoint's epoch.
+fn test_best(run: &Run, base: &Device) -> Result<(Stats, usize)> {
+    let best = Checkpoint::load(&run.run_dir.join("best.bpk"))?;
+    let model = best.model("ema", base)?;
+    let input = best.header.model.input_size();
+    let (test, _) = evaluate_ids(&model, run.real, &run.split.test, input, base)?;
+    run_files::write_test(
+        run.run_dir,
+        &TestRecord {
+            bbox: run_files::IouStats { stats: test.bbox },
+            checkpoint: "best.bpk".into(),
+            epoch: best.header.epoch,
+            images: run.split.test.len(),
+            proxy: run.real.proxy,
+            segm: run_files::IouStats { stats: test.segm },
+            split: "test".into(),
+        },
+    )?;
+    Ok((test, best.header.epoch))
 }

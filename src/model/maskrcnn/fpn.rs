@@ -8,7 +8,7 @@ use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::PaddingConfig2d;
 use burn::tensor::{Device, Tensor};
 
-use crate::model::common::{conv_macs, upsample2x};
+use crate::model::layers::{conv_macs, upsample2x};
 
 #[derive(Module, Debug)]
 pub struct Fpn {

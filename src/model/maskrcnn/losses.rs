@@ -5,8 +5,8 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 
-pub use crate::model::yolo::loss::bce_with_logits;
-use crate::model::yolo::loss::log_softmax_stable;
+pub use crate::model::loss::bce_with_logits;
+use crate::model::loss::log_softmax_stable;
 
 /// Element-wise smooth-L1: `0.5 x²/β` for `|x| < β`, else `|x| − 0.5β`; `β < 1e-5` is L1.
 ///
@@ -49,32 +49,23 @@ pub fn one_hot(labels: &[usize], k: usize, device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(v, [labels.len(), k]), device)
 }
 
-/// Host `f32` vector → tensor of `shape`.
-pub fn host<const D: usize>(v: Vec<f32>, shape: [usize; D], device: &Device) -> Tensor<D> {
-    Tensor::from_data(TensorData::new(v, shape), device)
-}
-
-/// Tensor → host `f32` vector.
-pub fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data_as::<f32>().try_into_vec::<f32>().unwrap()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::util::tensor::{host, to_host};
 
     #[test]
     fn smooth_l1_hand_values() {
         let d = Device::flex();
         let p = host(vec![0.0, 0.05, 1.0, -2.0], [1, 4], &d);
         let t = Tensor::zeros([1, 4], &d);
-        let v = to_vec(smooth_l1(p.clone(), t.clone(), 1.0 / 9.0));
+        let v = to_host(smooth_l1(p.clone(), t.clone(), 1.0 / 9.0));
         let b = 1.0f32 / 9.0;
         let want = [0.0, 0.5 * 0.0025 / b, 1.0 - 0.5 * b, 2.0 - 0.5 * b];
         for (a, e) in v.iter().zip(want) {
             assert!((a - e).abs() < 1e-6, "{v:?}");
         }
-        assert_eq!(to_vec(smooth_l1(p, t, 0.0)), vec![0.0, 0.05, 1.0, 2.0]);
+        assert_eq!(to_host(smooth_l1(p, t, 0.0)), vec![0.0, 0.05, 1.0, 2.0]);
     }
 
     #[test]
@@ -82,7 +73,7 @@ mod tests {
         let d = Device::flex();
         let l = host(vec![0.0, 0.0, 1000.0, 0.0], [2, 2], &d);
         // Row 0: uniform → ln 2; row 1: saturated correct → 0.
-        let v = to_vec(cross_entropy(l, &[1, 0]))[0];
+        let v = to_host(cross_entropy(l, &[1, 0]))[0];
         assert!((v - 2f32.ln() / 2.0).abs() < 1e-6, "{v}");
     }
 }

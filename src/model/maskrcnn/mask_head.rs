@@ -13,9 +13,10 @@ use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
-use super::losses::{bce_with_logits, host, one_hot};
+use super::losses::{bce_with_logits, one_hot};
 use super::roi_align::roi_align_mask;
-use crate::model::common::conv_macs;
+use crate::model::layers::conv_macs;
+use crate::util::tensor::host;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MaskHeadConfig {
@@ -234,7 +235,7 @@ pub fn paste_mask(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::maskrcnn::losses::to_vec;
+    use crate::util::tensor::{host, to_host};
 
     #[test]
     fn paste_full_map_fills_the_box() {
@@ -288,8 +289,8 @@ mod tests {
         let mut v = vec![-30.0f32; 4];
         v.extend([30.0f32; 4]);
         let logits = host(v, [1, 2, 2, 2], &d);
-        let l1 = to_vec(mask_loss(logits.clone(), &[1], vec![1.0; 4]))[0];
-        let l0 = to_vec(mask_loss(logits, &[0], vec![1.0; 4]))[0];
+        let l1 = to_host(mask_loss(logits.clone(), &[1], vec![1.0; 4]))[0];
+        let l0 = to_host(mask_loss(logits, &[0], vec![1.0; 4]))[0];
         assert!(l1 < 1e-6 && (l0 - 30.0).abs() < 1e-3, "{l1} {l0}");
     }
 }

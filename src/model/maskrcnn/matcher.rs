@@ -5,7 +5,7 @@
 //! Plain Rust over host vectors, no gradients. The pairwise IoU matrix is `G × N`
 //! row-major (GT rows, prediction columns), like detectron2's `match_quality_matrix`.
 
-use crate::model::yolo::postprocess::box_iou;
+use crate::model::detection::box_iou;
 
 /// Label of an ignored prediction (between the thresholds of the RPN matcher).
 pub const IGNORE: i8 = -1;

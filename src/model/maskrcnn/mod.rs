@@ -14,7 +14,6 @@
 //! the YOLO model's types ([`ImageTargets`], [`Detection`]) so one loop serves both.
 
 pub mod anchors;
-pub mod bench;
 pub mod box_coder;
 pub mod fpn;
 pub mod losses;
@@ -34,12 +33,13 @@ use rand::Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub use crate::model::yolo::loss::ImageTargets;
-pub use crate::model::yolo::postprocess::Detection;
-pub use crate::model::yolo::ModelSummary;
+use crate::config::{MaskRcnnModelConfig, MaskRcnnPreset};
+pub use crate::data::targets::ImageTargets;
+pub use crate::model::detection::Detection;
+pub use crate::model::summary::ModelSummary;
+use crate::util::tensor::{host, to_host};
 use anchors::AnchorConfig;
 use fpn::Fpn;
-use losses::{host, to_vec};
 use mask_head::{mask_loss, mask_targets, paste_mask, MaskHead, MaskHeadConfig};
 use pooler::pool_levels;
 use resnet::ResNet;
@@ -72,6 +72,37 @@ pub struct MaskRcnnConfig {
 }
 
 impl MaskRcnnConfig {
+    /// The model of a validated `[model]` table: its preset at `input_size` px with
+    /// `num_classes`, then each size the table sets.
+    pub fn from_config(m: &MaskRcnnModelConfig, input_size: usize, num_classes: usize) -> Self {
+        let mut c = match m.preset {
+            MaskRcnnPreset::Compact => MaskRcnnConfig::new(m.depth, num_classes),
+            MaskRcnnPreset::Paper => MaskRcnnConfig::paper(m.depth, num_classes),
+        }
+        .with_width_mult(m.width_mult)
+        .with_input_size(input_size);
+        if let Some(f) = m.fpn_channels {
+            c.fpn_channels = f;
+        }
+        if let Some(s) = &m.anchor_sizes {
+            c.anchors = AnchorConfig {
+                sizes: s.clone(),
+                ..c.anchors
+            };
+        }
+        let r = &mut c.rpn;
+        r.batch_per_image = m.rpn_batch.unwrap_or(r.batch_per_image);
+        r.pre_nms_topk_train = m.rpn_pre_nms_topk_train.unwrap_or(r.pre_nms_topk_train);
+        r.post_nms_topk_train = m.rpn_post_nms_topk_train.unwrap_or(r.post_nms_topk_train);
+        r.pre_nms_topk_test = m.rpn_pre_nms_topk_test.unwrap_or(r.pre_nms_topk_test);
+        r.post_nms_topk_test = m.rpn_post_nms_topk_test.unwrap_or(r.post_nms_topk_test);
+        c.roi.batch_per_image = m.roi_batch.unwrap_or(c.roi.batch_per_image);
+        c.roi.fc_dim = m.box_fc_dim.unwrap_or(c.roi.fc_dim);
+        c.mask.conv_dim = m.mask_conv_dim.unwrap_or(c.mask.conv_dim);
+        c.mask.class_agnostic = m.mask_class_agnostic.unwrap_or(c.mask.class_agnostic);
+        c
+    }
+
     /// Compact preset (see the module docs).
     pub fn new(depth: usize, num_classes: usize) -> Self {
         Self {
@@ -194,12 +225,13 @@ pub struct MaskRcnnLosses {
 }
 
 impl MaskRcnnLosses {
-    pub const NAMES: [&'static str; 6] =
-        ["rpn_cls", "rpn_box", "roi_cls", "roi_box", "mask", "total"];
+    /// The terms' names as logged (`metrics.jsonl`, `results.csv`): the RoI head's
+    /// classification and box terms are `cls` and `box`.
+    pub const NAMES: [&'static str; 5] = ["rpn_cls", "rpn_box", "cls", "box", "mask"];
 
-    /// Host values in [`Self::NAMES`] order (syncs the device).
+    /// Host values in [`Self::NAMES`] order, then the total (syncs the device).
     pub fn values(&self) -> [f32; 6] {
-        let v = |t: &Tensor<1>| to_vec(t.clone())[0];
+        let v = |t: &Tensor<1>| to_host(t.clone())[0];
         [
             v(&self.rpn_cls),
             v(&self.rpn_box),
@@ -396,7 +428,7 @@ impl MaskRcnn {
         );
         let logits = self.mask_head.forward(pooled);
         let [n, k, m, _] = logits.dims();
-        let probs = to_vec(sigmoid(logits));
+        let probs = to_host(sigmoid(logits));
         let flat: Vec<([f32; 4], f32, usize, usize)> = dets
             .iter()
             .enumerate()
@@ -449,7 +481,7 @@ impl MaskRcnn {
             + self.box_head.macs(cfg.rpn.post_nms_topk_test)
             + self.mask_head.macs(cfg.roi.max_det, cfg.mask.pool_size);
         ModelSummary {
-            params: crate::model::common::trainable_params(self),
+            params: crate::model::layers::trainable_params(self),
             gflops: 2.0 * macs as f64 / 1e9,
             input,
         }

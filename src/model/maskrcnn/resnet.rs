@@ -13,7 +13,7 @@ use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 
-use crate::model::common::conv_macs;
+use crate::model::layers::conv_macs;
 
 /// Blocks per stage for a supported depth, and whether they are bottlenecks.
 pub fn depth_layout(depth: usize) -> ([usize; 4], bool) {
@@ -217,7 +217,7 @@ impl ResNet {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::common::trainable_params;
+    use crate::model::layers::trainable_params;
 
     #[test]
     fn params_match_torchvision() {

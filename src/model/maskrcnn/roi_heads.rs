@@ -19,13 +19,14 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use super::box_coder::{clip_box, BoxCoder};
-use super::losses::{cross_entropy, host, one_hot, smooth_l1, to_vec};
+use super::losses::{cross_entropy, one_hot, smooth_l1};
 use super::matcher::{pairwise_iou, Matcher};
 use super::roi_align::index_tensor;
 use super::rpn::Proposal;
 use super::sampler::subsample_labels;
-use crate::model::yolo::loss::ImageTargets;
-use crate::model::yolo::postprocess::nms;
+use crate::data::targets::ImageTargets;
+use crate::model::detection::nms;
+use crate::util::tensor::{host, to_host};
 
 /// RoI-head hyper-parameters (detectron2 `MODEL.ROI_HEADS.*`, `MODEL.ROI_BOX_HEAD.*`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -287,8 +288,8 @@ pub fn box_inference(
     let [n, k1] = cls.dims();
     let nc = k1 - 1;
     let nd = deltas.dims()[1] / 4;
-    let probs = to_vec(softmax(cls, 1));
-    let deltas = to_vec(deltas);
+    let probs = to_host(softmax(cls, 1));
+    let deltas = to_host(deltas);
     let coder = BoxCoder::roi();
     let mut per_image: Vec<Vec<BoxDetection>> = vec![Vec::new(); num_images];
     for r in 0..n {
@@ -376,7 +377,7 @@ mod tests {
             &d,
         );
         let (ce, reg) = box_loss(cls.clone(), deltas.clone(), &sampled, &t, &cfg, 1);
-        assert!(to_vec(ce)[0] < 1e-6 && to_vec(reg)[0] < 1e-5);
+        assert!(to_host(ce)[0] < 1e-6 && to_host(reg)[0] < 1e-5);
         let dets = box_inference(cls, deltas, &sampled.rois, 1, [100, 100], &cfg);
         assert_eq!(dets[0].len(), 1);
         let (b, s, c) = dets[0][0];

@@ -17,13 +17,14 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use super::box_coder::{clip_box, BoxCoder};
-use super::losses::{bce_with_logits, host, smooth_l1, to_vec};
+use super::losses::{bce_with_logits, smooth_l1};
 use super::matcher::{pairwise_iou, Matcher, NEGATIVE, POSITIVE};
 use super::roi_align::index_tensor;
 use super::sampler::subsample_labels;
-use crate::model::common::conv_macs;
-use crate::model::yolo::loss::ImageTargets;
-use crate::model::yolo::postprocess::nms;
+use crate::data::targets::ImageTargets;
+use crate::model::detection::nms;
+use crate::model::layers::conv_macs;
+use crate::util::tensor::{host, to_host};
 
 /// RPN hyper-parameters (detectron2 `MODEL.RPN.*`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -210,8 +211,8 @@ pub fn find_proposals(
     nms_iou: f32,
 ) -> Vec<Vec<Proposal>> {
     let [b, total] = out.logits.dims();
-    let logits = to_vec(out.logits.clone().detach());
-    let deltas = to_vec(out.deltas.clone().detach());
+    let logits = to_host(out.logits.clone().detach());
+    let deltas = to_host(out.deltas.clone().detach());
     let coder = BoxCoder::rpn();
     (0..b)
         .map(|i| {
@@ -351,8 +352,8 @@ mod tests {
         assert_eq!(out.logits.dims(), [2, (6 + 2) * 3]);
         assert_eq!(out.deltas.dims(), [2, (6 + 2) * 3, 4]);
         assert_eq!(out.levels, vec![(4, 2, 3), (8, 1, 2)]);
-        let lg = to_vec(out.logits);
-        let dl = to_vec(out.deltas);
+        let lg = to_host(out.logits);
+        let dl = to_host(out.deltas);
         // Row r belongs to cell anchor r % 3 at every location of every level.
         for r in 0..24 {
             assert_eq!(lg[24 + r], (r % 3) as f32);
@@ -425,9 +426,9 @@ mod tests {
         };
         let (cls, reg) = rpn_loss(&out, &anchors, &t, &cfg, &mut ChaCha8Rng::seed_from_u64(0));
         // BCE at logit 0 is ln 2 for each of the 4 sampled anchors, / (1 image × 8).
-        assert!((to_vec(cls)[0] - 4.0 * 2f32.ln() / 8.0).abs() < 1e-6);
+        assert!((to_host(cls)[0] - 4.0 * 2f32.ln() / 8.0).abs() < 1e-6);
         // Target deltas are 0: L1 = 4 × 0.5 on the positive, / 8.
-        assert!((to_vec(reg)[0] - 2.0 / 8.0).abs() < 1e-6);
+        assert!((to_host(reg)[0] - 2.0 / 8.0).abs() < 1e-6);
         // No GT: every sampled anchor is negative, no box loss.
         let empty = vec![ImageTargets::default()];
         let (cls, reg) = rpn_loss(
@@ -437,7 +438,7 @@ mod tests {
             &cfg,
             &mut ChaCha8Rng::seed_from_u64(0),
         );
-        assert!((to_vec(cls)[0] - 4.0 * 2f32.ln() / 8.0).abs() < 1e-6);
-        assert_eq!(to_vec(reg)[0], 0.0);
+        assert!((to_host(cls)[0] - 4.0 * 2f32.ln() / 8.0).abs() < 1e-6);
+        assert_eq!(to_host(reg)[0], 0.0);
     }
 }

@@ -7,7 +7,8 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
 use super::scale::Scaler;
-use crate::model::common::{C2psa, C3k2, ConvBn, Sppf};
+use crate::model::yolo::attention::C2psa;
+use crate::model::yolo::blocks::{C3k2, ConvBn, Sppf};
 
 /// Backbone of YOLO11, layer names follow the yaml's indices.
 #[derive(Module, Debug)]

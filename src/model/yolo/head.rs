@@ -9,7 +9,8 @@ use burn::module::{Module, Param};
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::tensor::{Device, Tensor};
 
-use crate::model::common::{conv_macs, ConvBn, Proto};
+use crate::model::layers::conv_macs;
+use crate::model::yolo::blocks::{ConvBn, Proto};
 
 /// Bins of the distribution focal loss box representation (ultralytics `reg_max`).
 pub const REG_MAX: usize = 16;

@@ -9,32 +9,16 @@
 //! log-softmax are written in their overflow-free forms; the normalised box area of the
 //! mask loss is clamped to at least one prototype pixel; CIoU carries the reference's eps.
 //!
-//! Ground truth comes as [`YoloTargets`] (per image: boxes xyxy px, classes, instance masks
+//! Ground truth comes as [`Targets`] (per image: boxes xyxy px, classes, instance masks
 //! at input resolution). The assigner runs on host copies of the detached predictions.
 
-use burn::tensor::activation::relu;
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use super::assigner::{assign_image, AssignerConfig, ImageAssignment};
 use super::head::REG_MAX;
 use super::YoloOutput;
-
-/// Ground truth of one image. Masks are row-major `H × W` at the network input size,
-/// non-zero inside the instance; pixels shared by several instances go to the smaller one.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct ImageTargets {
-    /// xyxy in input pixels.
-    pub boxes: Vec<[f32; 4]>,
-    pub classes: Vec<usize>,
-    /// One mask per instance, `H · W` bytes each.
-    pub masks: Vec<Vec<u8>>,
-}
-
-/// Ground truth of a batch, one entry per image in batch order.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct YoloTargets {
-    pub images: Vec<ImageTargets>,
-}
+use crate::data::targets::{ImageTargets, Targets};
+use crate::util::tensor::{host, scalar, to_host};
 
 /// Loss gains (ultralytics hyp `box`, `cls`, `dfl`; the mask loss uses the `box` gain there).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,30 +54,19 @@ pub struct LossTerms {
 }
 
 impl LossTerms {
-    /// Host values `[box, cls, dfl, seg, total]` (syncs the device).
+    /// The terms' names as logged (`metrics.jsonl`, `results.csv`), ultralytics' order.
+    pub const NAMES: [&'static str; 4] = ["box", "cls", "dfl", "seg"];
+
+    /// Host values in [`Self::NAMES`] order, then the total (syncs the device).
     pub fn values(&self) -> [f32; 5] {
-        let v = |t: &Tensor<1>| {
-            t.clone()
-                .into_data_as::<f32>()
-                .try_into_vec::<f32>()
-                .unwrap()[0]
-        };
         [
-            v(&self.bbox),
-            v(&self.cls),
-            v(&self.dfl),
-            v(&self.seg),
-            v(&self.total),
+            scalar(&self.bbox),
+            scalar(&self.cls),
+            scalar(&self.dfl),
+            scalar(&self.seg),
+            scalar(&self.total),
         ]
     }
-}
-
-pub(crate) fn to_host<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data_as::<f32>().try_into_vec::<f32>().unwrap()
-}
-
-fn host_tensor<const D: usize>(v: Vec<f32>, shape: [usize; D], device: &Device) -> Tensor<D> {
-    Tensor::from_data(TensorData::new(v, shape), device)
 }
 
 fn host_index(v: Vec<usize>, device: &Device) -> Tensor<1, Int> {
@@ -102,18 +75,7 @@ fn host_index(v: Vec<usize>, device: &Device) -> Tensor<1, Int> {
     Tensor::from_data(TensorData::new(v, [n]), device)
 }
 
-/// Overflow-free log-softmax along `dim`.
-pub fn log_softmax_stable<const D: usize>(x: Tensor<D>, dim: usize) -> Tensor<D> {
-    let m = x.clone().max_dim(dim).detach();
-    let z = x - m;
-    let lse = z.clone().exp().sum_dim(dim).log();
-    z - lse
-}
-
-/// Element-wise BCE with logits, `max(x, 0) − x·y + log(1 + e^{−|x|})`.
-pub fn bce_with_logits<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<D> {
-    relu(x.clone()) - x.clone() * y + x.abs().neg().exp().log1p()
-}
+pub use crate::model::loss::{bce_with_logits, log_softmax_stable};
 
 /// DFL expectation: distances `[.., 4]` from bin logits `[.., 4, REG_MAX]` (last dim bins).
 fn dfl_expectation<const D: usize, const D1: usize>(logits: Tensor<D>) -> Tensor<D1> {
@@ -122,7 +84,7 @@ fn dfl_expectation<const D: usize, const D1: usize>(logits: Tensor<D>) -> Tensor
     let bins: Vec<f32> = (0..REG_MAX).map(|i| i as f32).collect();
     let mut shape = [1usize; D];
     shape[D - 1] = REG_MAX;
-    let proj = host_tensor(bins, shape, &device);
+    let proj = host(bins, shape, &device);
     (p * proj).sum_dim(D - 1).squeeze_dim(D - 1)
 }
 
@@ -211,7 +173,7 @@ struct Positive {
 /// Full YOLO-seg loss of a batch; see the module docs.
 ///
 /// `targets.images.len()` must equal the batch size; class indices must be `< nc`.
-pub fn yolo_loss(out: &YoloOutput, targets: &YoloTargets, weights: &LossWeights) -> LossTerms {
+pub fn yolo_loss(out: &YoloOutput, targets: &Targets, weights: &LossWeights) -> LossTerms {
     let device = out.cls_logits.device();
     let [b, nc, na] = out.cls_logits.dims();
     let [_, nm, ph, pw] = out.proto.dims();
@@ -298,7 +260,7 @@ pub fn yolo_loss(out: &YoloOutput, targets: &YoloTargets, weights: &LossWeights)
             }
         }
     }
-    let tgt = host_tensor(tgt, [b, nc, na], &device);
+    let tgt = host(tgt, [b, nc, na], &device);
     let cls = bce_with_logits(out.cls_logits.clone(), tgt)
         .sum()
         .div_scalar(tss);
@@ -386,16 +348,16 @@ fn box_losses(
             dfl_w[base + tl + 1] = 1.0 - wl;
         }
     }
-    let anc = host_tensor(anc, [p, 4], &device);
-    let sign = host_tensor(vec![-1.0, -1.0, 1.0, 1.0], [1, 4], &device);
+    let anc = host(anc, [p, 4], &device);
+    let sign = host(vec![-1.0, -1.0, 1.0, 1.0], [1, 4], &device);
     let pred = anc + dist * sign;
-    let target = host_tensor(tbox, [p, 4], &device);
-    let w = host_tensor(wts, [p], &device);
+    let target = host(tbox, [p, 4], &device);
+    let w = host(wts, [p], &device);
     let iou = ciou_tensor(pred, target);
     let loss_iou = ((iou.neg() + 1.0) * w.clone()).sum().div_scalar(tss);
 
     let logp = log_softmax_stable(logits, 2);
-    let dfl_w = host_tensor(dfl_w, [p, 4, REG_MAX], &device);
+    let dfl_w = host(dfl_w, [p, 4, REG_MAX], &device);
     let per = (logp * dfl_w).sum_dim(2).neg().mean_dim(1).reshape([p]); // [P]
     let loss_dfl = (per * w).sum().div_scalar(tss);
     (loss_iou.reshape([1]), loss_dfl.reshape([1]))
@@ -408,7 +370,7 @@ fn box_losses(
 /// weight anyway): `Σ_groups Σ_window bce(coef · proto, gt) / (Hp·Wp) / area / #positives`.
 fn mask_loss(
     out: &YoloOutput,
-    targets: &YoloTargets,
+    targets: &Targets,
     assignments: &[ImageAssignment],
     positives: &[Positive],
     [nm, ph, pw]: [usize; 3],
@@ -442,7 +404,7 @@ fn mask_loss(
                     gt_row.push(f32::from(index_map[r * pw + c] == label));
                 }
             }
-            let gt_row = host_tensor(gt_row, [1, h * w], &device);
+            let gt_row = host(gt_row, [1, h * w], &device);
             let proto = proto_i
                 .clone()
                 .narrow(1, win.rows.0, h)
@@ -551,7 +513,7 @@ mod tests {
             proto: Tensor::zeros([1, 2, 8, 8], &d),
             grid,
         };
-        let t = YoloTargets {
+        let t = Targets {
             images: vec![ImageTargets {
                 boxes: vec![[0.0, 0.0, 8.0, 8.0]],
                 classes: vec![0],

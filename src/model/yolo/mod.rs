@@ -4,14 +4,14 @@
 //! - [`assigner`]: task-aligned assigner (plain Rust over host vectors, no gradients).
 //! - [`loss`]: BCE class, CIoU + DFL box and prototype mask losses ([`loss::yolo_loss`]).
 //! - [`postprocess`]: decoding, class-wise NMS and mask assembly for inference.
-//! - [`bench`]: forward / train-step timing helper for `chicktrain bench`.
 //!
 //! This module defines the model config ([`YoloSegConfig`]), the model ([`YoloSeg`]) and its
 //! output ([`YoloOutput`]). It reads no training config.
 
 pub mod assigner;
+pub mod attention;
 pub mod backbone;
-pub mod bench;
+pub mod blocks;
 pub mod head;
 pub mod loss;
 pub mod neck;
@@ -22,12 +22,15 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
+pub use crate::model::summary::ModelSummary;
 use backbone::Backbone;
 use head::{SegmentHead, REG_MAX};
 pub use neck::HeadLevels;
 use neck::Neck;
 pub use scale::Scale;
 use scale::Scaler;
+
+use crate::config::{YoloModelConfig, YoloScale};
 
 /// Scene-sized options of a YOLO-seg model. Build with [`YoloSegConfig::new`] and the
 /// `with_*` setters; [`YoloSegConfig::init`] validates and panics naming the bad value.
@@ -47,6 +50,25 @@ pub struct YoloSegConfig {
 }
 
 impl YoloSegConfig {
+    /// The model of a validated `[model]` table at `input_size` px with `num_classes`.
+    pub fn from_config(m: &YoloModelConfig, input_size: usize, num_classes: usize) -> Self {
+        let scale = match m.scale {
+            YoloScale::N => Scale::N,
+            YoloScale::S => Scale::S,
+        };
+        let levels = if m.levels == [4, 5] {
+            HeadLevels::P4P5
+        } else {
+            HeadLevels::P3P5
+        };
+        YoloSegConfig::new(scale, num_classes)
+            .with_input_size(input_size)
+            .with_levels(levels)
+            .with_c2psa(m.c2psa)
+            .with_width_mult(m.width_mult)
+            .with_num_masks(m.prototypes)
+    }
+
     /// The YOLO11-seg preset: 640 px, heads on P3–P5, C2PSA on, 32 prototypes.
     pub fn new(scale: Scale, num_classes: usize) -> Self {
         Self {
@@ -194,27 +216,6 @@ pub struct YoloOutput {
     pub grid: AnchorGrid,
 }
 
-/// Size of a model, printed at start.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ModelSummary {
-    pub params: usize,
-    /// 2 × multiply-accumulates of all convolutions (and attention matmuls) at `input` px.
-    pub gflops: f64,
-    pub input: usize,
-}
-
-impl std::fmt::Display for ModelSummary {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{:.2} M parameters, {:.1} GFLOPs at {} px",
-            self.params as f64 / 1e6,
-            self.gflops,
-            self.input
-        )
-    }
-}
-
 #[derive(Module, Debug)]
 pub struct YoloSeg {
     pub backbone: Backbone,
@@ -273,7 +274,7 @@ impl YoloSeg {
             .collect();
         let macs = self.backbone.macs(hw) + self.neck.macs(hw) + self.head.macs(&sizes);
         ModelSummary {
-            params: crate::model::common::trainable_params(self),
+            params: crate::model::layers::trainable_params(self),
             gflops: 2.0 * macs as f64 / 1e9,
             input,
         }
@@ -376,18 +377,24 @@ mod tests {
             (a.box_dist, b.box_dist),
             (a.mask_coef, b.mask_coef),
         ] {
-            let (p, q) = (loss::to_host(p), loss::to_host(q));
+            let (p, q) = (
+                crate::util::tensor::to_host(p),
+                crate::util::tensor::to_host(q),
+            );
             for (u, v) in p.iter().zip(&q) {
                 assert!((u - v).abs() <= 1e-3 * (1.0 + u.abs()), "{u} vs {v}");
             }
         }
-        let (p, q) = (loss::to_host(a.proto), loss::to_host(b.proto));
+        let (p, q) = (
+            crate::util::tensor::to_host(a.proto),
+            crate::util::tensor::to_host(b.proto),
+        );
         assert!(p
             .iter()
             .zip(&q)
             .all(|(u, v)| (u - v).abs() <= 1e-3 * (1.0 + u.abs())));
         // Running stats really moved, so the test compares something.
-        let rm = loss::to_host(eval.backbone.l0.bn.running_mean.value());
+        let rm = crate::util::tensor::to_host(eval.backbone.l0.bn.running_mean.value());
         assert!(rm.iter().any(|v| v.abs() > 1e-4));
     }
 

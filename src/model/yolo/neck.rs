@@ -10,7 +10,8 @@ use burn::tensor::{Device, Tensor};
 
 use super::backbone::BackboneChannels;
 use super::scale::Scaler;
-use crate::model::common::{upsample2x, C3k2, ConvBn};
+use crate::model::layers::upsample2x;
+use crate::model::yolo::blocks::{C3k2, ConvBn};
 
 /// Which pyramid levels carry detection heads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

@@ -8,16 +8,17 @@ use burn::tensor::{Tensor, TensorData};
 use image::{Rgb, RgbImage};
 use serde_json::json;
 
+use crate::annotations::coco::{save_results, Detection};
 use crate::config::{self, DeviceKind};
-use crate::data::coco::{save_results, Detection};
-use crate::data::dataset::{read_image, RealSet};
+use crate::data::dataset::read_image;
 use crate::data::letterbox::Letterbox;
-use crate::data::split::Split;
 use crate::render::export::instance_color;
-
-use super::checkpoint::{Checkpoint, Stats};
-use super::evaluate::{evaluate_ids, push_planes, to_coco};
-use super::trainer::{device_of, train, TrainOptions, TrainSummary};
+use crate::train::checkpoint::Checkpoint;
+use crate::train::device::device_of;
+pub use crate::train::evaluate::SplitName;
+use crate::train::evaluate::{push_planes, score_checkpoint, to_coco};
+use crate::train::run_files::StatsRecord;
+use crate::train::trainer::{train, TrainOptions, TrainSummary};
 
 /// Confidence threshold of `predict` (ultralytics' predict default).
 pub const PREDICT_CONF: f32 = 0.25;
@@ -33,7 +34,7 @@ pub fn stats_line(kind: &str, s: &[f64; 12]) -> String {
 /// `chicktrain train` / `chicktrain --config X`.
 pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -> Result<String> {
     let cfg = config::load(config_name, overrides)?;
-    super::interrupt::install();
+    crate::train::interrupt::install();
     let s: TrainSummary = train(cfg, opts)?;
     Ok(format!(
         "trained {} epochs in {:.1} s ({:.2} train img/s); best epoch {}; run files in {}\n\
@@ -54,18 +55,8 @@ pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -
     ))
 }
 
-/// Which split `eval` scores.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum SplitName {
-    Train,
-    Val,
-    Test,
-}
-
-/// `chicktrain eval --checkpoint X [--split val|test] [--data CONFIG] [--json]`: rebuilds
-/// the data from the checkpoint's config and split and scores the checkpoint's weights.
-/// With `--data`, the real set of another config is used instead (e.g. your photos),
-/// split by that config's `data.split` and seed, at the checkpoint's input size.
+/// `chicktrain eval --checkpoint X [--split val|test] [--data CONFIG] [--json]`: scores
+/// the checkpoint's weights (see [`score_checkpoint`]).
 pub fn eval_cmd(
     checkpoint: &Path,
     split: SplitName,
@@ -73,64 +64,24 @@ pub fn eval_cmd(
     device: Option<DeviceKind>,
     json_out: bool,
 ) -> Result<String> {
-    let ck = Checkpoint::load(checkpoint)?;
-    let dev = device_of(device.unwrap_or(ck.header.config.device));
-    let (real, split_ids, origin) = match data {
-        None => {
-            let cfg = &ck.header.config;
-            let real = RealSet::load(&cfg.data, cfg.seed)
-                .with_context(|| format!("rebuilding the data of {}", checkpoint.display()))?;
-            (
-                real,
-                ck.header.split.clone(),
-                format!("{}", checkpoint.display()),
-            )
-        }
-        Some(name) => {
-            let mut cfg = config::load(name, &[])?;
-            cfg.data.image_size = ck.header.model.input_size() as u32;
-            let real = RealSet::load(&cfg.data, cfg.seed)?;
-            let split = Split::new(&real.ids(), cfg.data.split, cfg.seed)?;
-            (real, split, format!("the data of {name}"))
-        }
-    };
-    if real.cat_ids != ck.header.category_ids {
-        bail!(
-            "the categories of {origin} {:?} differ from the checkpoint's {:?}",
-            real.cat_ids,
-            ck.header.category_ids
-        );
-    }
-    let ids = match split {
-        SplitName::Train => &split_ids.train,
-        SplitName::Val => &split_ids.val,
-        SplitName::Test => &split_ids.test,
-    };
-    if ids.is_empty() {
-        bail!("the {split:?} split of {origin} is empty");
-    }
-    let model = ck
-        .model("ema", &dev)
-        .with_context(|| format!("in checkpoint {}", checkpoint.display()))?;
-    let (stats, _): (Stats, _) = evaluate_ids(&model, &real, ids, &dev)?;
+    let s = score_checkpoint(checkpoint, split, data, device)?;
     if json_out {
-        return Ok(
-            json!({"bbox": {"stats": stats.bbox}, "segm": {"stats": stats.segm}}).to_string(),
-        );
+        return Ok(serde_json::to_string(&StatsRecord::from(&s.stats))?);
     }
     Ok(format!(
-        "{} (epoch {}) on the {:?} split of {origin}, {} images{}:\n{}\n{}",
+        "{} (epoch {}) on the {:?} split of {}, {} images{}:\n{}\n{}",
         checkpoint.display(),
-        ck.header.epoch,
+        s.epoch,
         split,
-        ids.len(),
-        if real.proxy {
+        s.origin,
+        s.images,
+        if s.proxy {
             " [proxy-real renders, not real photos]"
         } else {
             ""
         },
-        stats_line("bbox", &stats.bbox),
-        stats_line("segm", &stats.segm)
+        stats_line("bbox", &s.stats.bbox),
+        stats_line("segm", &s.stats.segm)
     ))
 }
 
@@ -239,18 +190,7 @@ pub fn predict_cmd(
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or(format!("{id}"));
-        let mut png = Vec::new();
-        image::ImageEncoder::write_image(
-            image::codecs::png::PngEncoder::new_with_quality(
-                &mut png,
-                image::codecs::png::CompressionType::Fast,
-                image::codecs::png::FilterType::Adaptive,
-            ),
-            ov.as_raw(),
-            w,
-            h,
-            image::ExtendedColorType::Rgb8,
-        )?;
+        let png = crate::util::png::encode_png(&ov)?;
         crate::util::write_atomic(&out_dir.join(format!("{stem}.png")), &png)?;
         images.push(json!({"id": id, "file_name": f.display().to_string(), "width": w, "height": h, "detections": dets.len()}));
         all.extend(dets);

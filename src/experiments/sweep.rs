@@ -23,7 +23,9 @@ use crate::config::{self, DeviceKind};
 use crate::eval::plots::{write_png, Panel, Series, PALETTE};
 use crate::eval::report::{mean_std, Table};
 use crate::train::checkpoint::Checkpoint;
-use crate::train::trainer::{smoke_config, train, TrainOptions};
+use crate::train::run_files;
+use crate::train::smoke::smoke_config;
+use crate::train::trainer::{train, TrainOptions};
 
 /// What to sweep.
 #[derive(Clone, Debug)]
@@ -76,35 +78,15 @@ pub fn parse_counts(s: &str) -> Result<Vec<usize>> {
     Ok(v)
 }
 
-fn stats_of(v: &serde_json::Value, kind: &str, file: &Path) -> Result<[f64; 12]> {
-    let a = v[kind]["stats"]
-        .as_array()
-        .with_context(|| format!("{} has no {kind}.stats", file.display()))?;
-    let s: Vec<f64> = a.iter().filter_map(|x| x.as_f64()).collect();
-    s.try_into()
-        .map_err(|_| anyhow::anyhow!("{}: {kind}.stats is not 12 numbers", file.display()))
-}
-
 /// Reads a finished run folder: `test.json` and the epoch times of `metrics.jsonl`.
 pub fn read_run(dir: &Path, synthetic: usize, seed: u64) -> Result<RunResult> {
-    let p = dir.join("test.json");
-    let text =
-        std::fs::read_to_string(&p).with_context(|| format!("cannot read {}", p.display()))?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{} is not JSON", p.display()))?;
-    let m = dir.join("metrics.jsonl");
-    let train_seconds = std::fs::read_to_string(&m)
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        .filter_map(|r| r["time"].as_f64())
-        .sum();
+    let t = run_files::read_test(dir)?;
     Ok(RunResult {
         synthetic,
         seed,
-        bbox: stats_of(&v, "bbox", &p)?,
-        segm: stats_of(&v, "segm", &p)?,
-        train_seconds,
+        bbox: t.bbox.stats,
+        segm: t.segm.stats,
+        train_seconds: run_files::train_seconds(dir)?,
     })
 }
 

@@ -234,13 +234,6 @@ impl Rle {
             counts: cnts,
         }
     }
-
-    /// `rleFrBbox`: the mask of an [x, y, w, h] box, through the polygon rasteriser.
-    pub fn from_bbox(bbox: [f64; 4], height: u32, width: u32) -> Rle {
-        let (xs, ys) = (bbox[0], bbox[1]);
-        let (xe, ye) = (xs + bbox[2], ys + bbox[3]);
-        super::polygon::rle_from_polygon(&[xs, ys, xs, ye, xe, ye, xe, ys], height, width)
-    }
 }
 
 /// The counts of a compressed string, as `rleFrString` reads them.

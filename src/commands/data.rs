@@ -1,12 +1,13 @@
-//! The commands behind the CLI, as library functions (the binary only parses flags).
+//! The data commands: `render`, `convert`, `coco-eval`, `bench coco`, `bench render`
+//! (none needs Burn).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 
-use crate::data::coco::{load_results, CocoDataset};
-use crate::data::{labelme, yolo_export};
+use crate::annotations::coco::{load_results, CocoDataset};
+use crate::annotations::{labelme, yolo_export};
 use crate::eval::{evaluate, IouType};
 
 /// `chicktrain coco-eval`: the pycocotools summary (or one JSON object) for a GT/DT pair.
@@ -104,14 +105,4 @@ pub fn render(
 pub fn bench_render(size: u32, images: usize, preset: &str, seed: u64) -> Result<String> {
     let opts = crate::render::RenderOptions::preset(preset, size)?;
     Ok(crate::render::bench_render(&opts, images, seed)?.to_string())
-}
-
-/// `chicktrain train` / `chicktrain --config X`: see [`crate::train::commands::train_cmd`].
-#[cfg(feature = "train")]
-pub fn train(
-    config_name: &str,
-    overrides: &[String],
-    opts: &crate::train::trainer::TrainOptions,
-) -> Result<String> {
-    crate::train::commands::train_cmd(config_name, overrides, opts)
 }

@@ -1,4 +1,13 @@
-//! Small helpers shared across stages.
+//! Small helpers shared across stages, one concept per file: atomic writes (here),
+//! stable hashing ([`hash`]), PNG encoding ([`png`]), progress bars ([`progress`]),
+//! summary statistics ([`stats`]) and host copies of tensors ([`tensor`], feature `train`).
+
+pub mod hash;
+pub mod png;
+pub mod progress;
+pub mod stats;
+#[cfg(feature = "train")]
+pub mod tensor;
 
 use std::io::Write;
 use std::path::Path;

@@ -1,5 +1,5 @@
-//! Building blocks shared by the model families: Conv-BN-SiLU, Bottleneck, C3k, C3k2, SPPF,
-//! the C2PSA attention block and the mask-prototype head (Proto).
+//! YOLO11 building blocks: Conv-BN-SiLU, Bottleneck, C3k, C3k2, SPPF and the
+//! mask-prototype head (Proto); the C2PSA attention block is in [`super::attention`].
 //!
 //! They follow ultralytics 8.3 `nn/modules/conv.py` and `block.py` layer for layer (same
 //! channel splits, same BN eps 1e-3 / momentum 0.03), so parameter counts match the
@@ -9,66 +9,21 @@
 //! (`macs`), computed from its own weight shapes, so the GFLOPs printed at start cannot drift
 //! from the model that is actually built.
 
-use burn::module::{Module, ModuleVisitor, Param};
+use burn::module::{Module, Param};
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::pool::{MaxPool2d, MaxPool2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d};
-use burn::tensor::activation::{silu, softmax};
-use burn::tensor::module::interpolate;
-use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
+use burn::tensor::activation::silu;
 use burn::tensor::{Device, Tensor};
+
+use crate::model::layers::conv_macs;
+#[cfg(test)]
+use crate::model::layers::trainable_params;
 
 /// BatchNorm epsilon used by ultralytics (`nn/modules/conv.py`, `Conv.bn`), not PyTorch's 1e-5.
 pub const BN_EPS: f64 = 1e-3;
 /// BatchNorm momentum used by ultralytics (`utils/torch_utils.py::initialize_weights`), not 0.1.
 pub const BN_MOMENTUM: f64 = 0.03;
-
-/// Number of trainable scalars of a module: every float parameter except BatchNorm running
-/// statistics (which Burn's `num_params` counts too, PyTorch's `parameters()` does not).
-pub fn trainable_params<M: Module>(module: &M) -> usize {
-    struct Count {
-        path: Vec<String>,
-        n: usize,
-    }
-    impl ModuleVisitor for Count {
-        fn enter_module(&mut self, name: &str, _container: &str) {
-            self.path.push(name.to_string());
-        }
-        fn exit_module(&mut self, _name: &str, _container: &str) {
-            self.path.pop();
-        }
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            let running = self.path.last().is_some_and(|s| s.starts_with("running_"));
-            if !running {
-                self.n += param.lazy_shape().num_elements();
-            }
-        }
-    }
-    let mut c = Count {
-        path: Vec::new(),
-        n: 0,
-    };
-    module.visit(&mut c);
-    c.n
-}
-
-/// Output size of a convolution or pooling with "same"-style padding `k / 2`.
-pub fn conv_out(size: usize, kernel: usize, stride: usize) -> usize {
-    (size + 2 * (kernel / 2) - kernel) / stride + 1
-}
-
-/// Nearest-neighbour ×2 upsampling (the only interpolation whose backward runs on both flex
-/// and ndarray, see `shared/notes/burn-0.22.md`).
-///
-/// # Shapes
-/// - `x`: `[B, C, H, W]` → `[B, C, 2H, 2W]`
-pub fn upsample2x(x: Tensor<4>) -> Tensor<4> {
-    let [_, _, h, w] = x.dims();
-    interpolate(
-        x,
-        InterpolateOptions::new(InterpolateMode::Nearest).with_output_size([2 * h, 2 * w]),
-    )
-}
 
 /// Convolution (no bias) + BatchNorm + optional SiLU: ultralytics' `Conv` (and `DWConv` when
 /// `groups > 1`).
@@ -161,14 +116,6 @@ impl ConvBn {
     pub fn macs(&self, hw: [usize; 2]) -> (u64, [usize; 2]) {
         conv_macs(&self.conv, hw)
     }
-}
-
-/// MACs of a plain [`Conv2d`] with padding `k/2` for an `[h, w]` input, and its output size.
-pub fn conv_macs(conv: &Conv2d, hw: [usize; 2]) -> (u64, [usize; 2]) {
-    let [co, ci_g, kh, kw] = conv.weight.dims();
-    let oh = conv_out(hw[0], kh, conv.stride[0]);
-    let ow = conv_out(hw[1], kw, conv.stride[1]);
-    ((co * ci_g * kh * kw * oh * ow) as u64, [oh, ow])
 }
 
 /// Residual block of two convs: ultralytics' `Bottleneck(c1, c2, shortcut, g, k, e)`.
@@ -425,165 +372,6 @@ impl Sppf {
     }
 }
 
-/// Multi-head self-attention over all positions of a feature map, with a depthwise 3×3
-/// positional encoding on the values: ultralytics' `Attention` (attn_ratio 0.5).
-#[derive(Module, Debug)]
-pub struct Attention {
-    pub qkv: ConvBn,
-    pub proj: ConvBn,
-    pub pe: ConvBn,
-    pub num_heads: usize,
-    pub head_dim: usize,
-    pub key_dim: usize,
-}
-
-impl Attention {
-    pub fn new(dim: usize, num_heads: usize, device: &Device) -> Self {
-        assert!(
-            num_heads > 0 && dim.is_multiple_of(num_heads),
-            "Attention: dim {dim} must be a positive multiple of num_heads {num_heads}"
-        );
-        let head_dim = dim / num_heads;
-        let key_dim = head_dim / 2;
-        assert!(
-            key_dim > 0,
-            "Attention: head_dim {head_dim} too small for a key"
-        );
-        let h = dim + 2 * key_dim * num_heads;
-        Self {
-            qkv: ConvBn::new(dim, h, 1, 1, 1, false, device),
-            proj: ConvBn::new(dim, dim, 1, 1, 1, false, device),
-            pe: ConvBn::new(dim, dim, 3, 1, dim, false, device),
-            num_heads,
-            head_dim,
-            key_dim,
-        }
-    }
-
-    /// # Shapes
-    /// - `x`: `[B, C, H, W]` → `[B, C, H, W]`
-    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let [b, c, h, w] = x.dims();
-        let n = h * w;
-        let (nh, kd, hd) = (self.num_heads, self.key_dim, self.head_dim);
-        // [B, nh, 2kd + hd, N]
-        let qkv = self.qkv.forward(x).reshape([b, nh, 2 * kd + hd, n]);
-        let q = qkv.clone().narrow(2, 0, kd);
-        let k = qkv.clone().narrow(2, kd, kd);
-        let v = qkv.narrow(2, 2 * kd, hd);
-        let scale = (kd as f64).powf(-0.5);
-        // [B, nh, N, N]
-        let attn = softmax(q.swap_dims(2, 3).matmul(k).mul_scalar(scale), 3);
-        // [B, nh, hd, N]
-        let out = v.clone().matmul(attn.swap_dims(2, 3));
-        let out = out.reshape([b, c, h, w]) + self.pe.forward(v.reshape([b, c, h, w]));
-        self.proj.forward(out)
-    }
-
-    pub fn macs(&self, hw: [usize; 2]) -> u64 {
-        let n = (hw[0] * hw[1]) as u64;
-        let heads = self.num_heads as u64;
-        let attn = heads * n * n * (self.key_dim + self.head_dim) as u64;
-        self.qkv.macs(hw).0 + self.proj.macs(hw).0 + self.pe.macs(hw).0 + attn
-    }
-
-    pub fn fuse(self) -> Self {
-        Self {
-            qkv: self.qkv.fuse(),
-            proj: self.proj.fuse(),
-            pe: self.pe.fuse(),
-            ..self
-        }
-    }
-}
-
-/// Attention + 2-layer 1×1 FFN, both residual: ultralytics' `PSABlock`.
-#[derive(Module, Debug)]
-pub struct PsaBlock {
-    pub attn: Attention,
-    pub ffn1: ConvBn,
-    pub ffn2: ConvBn,
-}
-
-impl PsaBlock {
-    pub fn new(c: usize, num_heads: usize, device: &Device) -> Self {
-        Self {
-            attn: Attention::new(c, num_heads, device),
-            ffn1: ConvBn::silu(c, 2 * c, 1, 1, device),
-            ffn2: ConvBn::new(2 * c, c, 1, 1, 1, false, device),
-        }
-    }
-
-    /// # Shapes
-    /// - `x`: `[B, C, H, W]` → `[B, C, H, W]`
-    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let x = x.clone() + self.attn.forward(x);
-        x.clone() + self.ffn2.forward(self.ffn1.forward(x))
-    }
-
-    pub fn macs(&self, hw: [usize; 2]) -> u64 {
-        self.attn.macs(hw) + self.ffn1.macs(hw).0 + self.ffn2.macs(hw).0
-    }
-
-    pub fn fuse(self) -> Self {
-        Self {
-            attn: self.attn.fuse(),
-            ffn1: self.ffn1.fuse(),
-            ffn2: self.ffn2.fuse(),
-        }
-    }
-}
-
-/// YOLO11's C2PSA: split in half, `n` PSA blocks on one half, concatenate, 1×1 back.
-#[derive(Module, Debug)]
-pub struct C2psa {
-    pub cv1: ConvBn,
-    pub cv2: ConvBn,
-    pub m: Vec<PsaBlock>,
-    pub c: usize,
-}
-
-impl C2psa {
-    /// `num_heads = max(c/64, 1)` with `c = channels/2` (ultralytics uses `c // 64`, which is 0
-    /// and crashes below 128 channels; we keep one head there so narrow models still build).
-    pub fn new(channels: usize, n: usize, device: &Device) -> Self {
-        let c = channels / 2;
-        assert!(c > 0 && n > 0, "C2PSA({channels}, n {n}) is empty");
-        let heads = (c / 64).max(1);
-        Self {
-            cv1: ConvBn::silu(channels, 2 * c, 1, 1, device),
-            cv2: ConvBn::silu(2 * c, channels, 1, 1, device),
-            m: (0..n).map(|_| PsaBlock::new(c, heads, device)).collect(),
-            c,
-        }
-    }
-
-    /// # Shapes
-    /// - `x`: `[B, C, H, W]` → `[B, C, H, W]`
-    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = self.cv1.forward(x);
-        let a = y.clone().narrow(1, 0, self.c);
-        let mut b = y.narrow(1, self.c, self.c);
-        for block in &self.m {
-            b = block.forward(b);
-        }
-        self.cv2.forward(Tensor::cat(vec![a, b], 1))
-    }
-
-    pub fn macs(&self, hw: [usize; 2]) -> u64 {
-        self.cv1.macs(hw).0 + self.cv2.macs(hw).0 + self.m.iter().map(|b| b.macs(hw)).sum::<u64>()
-    }
-
-    pub fn fuse(self) -> Self {
-        Self {
-            cv1: self.cv1.fuse(),
-            cv2: self.cv2.fuse(),
-            m: self.m.into_iter().map(PsaBlock::fuse).collect(),
-            c: self.c,
-        }
-    }
-}
-
 /// Mask prototypes: 3×3 conv, 2× transposed conv, 3×3 conv, 1×1 conv to `n_masks` maps at
 /// twice the input resolution (1/4 of the image when fed P3): ultralytics' `Proto`.
 #[derive(Module, Debug)]
@@ -635,6 +423,7 @@ impl Proto {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::yolo::attention::{Attention, C2psa};
 
     fn dev() -> Device {
         Device::flex()

@@ -129,6 +129,14 @@ pub fn rle_from_polygon(xy: &[f64], height: u32, width: u32) -> Rle {
     }
 }
 
+/// `rleFrBbox`: the mask of an [x, y, w, h] box, through the polygon rasteriser (here,
+/// not on [`Rle`], so that `rle` stays below `polygon`).
+pub fn rle_from_bbox(bbox: [f64; 4], height: u32, width: u32) -> Rle {
+    let (xs, ys) = (bbox[0], bbox[1]);
+    let (xe, ye) = (xs + bbox[2], ys + bbox[3]);
+    rle_from_polygon(&[xs, ys, xs, ye, xe, ye, xe, ys], height, width)
+}
+
 /// The union of several polygons of one instance, as `frPyObjects` + `merge` build it.
 pub fn rle_from_polygons(polys: &[Vec<f64>], height: u32, width: u32) -> Rle {
     let rles: Vec<Rle> = polys

@@ -1,0 +1,16 @@
+//! The annotation foundation every stage stands on: COCO files and masks (RLE and
+//! polygons byte-identical to pycocotools), LabelMe import, YOLO-seg export, image files
+//! and the seeded train/val/test split.
+//!
+//! It imports nothing from the rest of the crate but [`crate::util`], so the renderer
+//! (which writes COCO) and the evaluator (which reads it) sit above it, and the training
+//! loader in [`crate::data`] above the renderer.
+
+pub mod coco;
+pub mod image_file;
+pub mod labelme;
+pub mod mask;
+pub mod polygon;
+pub mod rle;
+pub mod split;
+pub mod yolo_export;

@@ -1,0 +1,10 @@
+//! Every command of the binary, as a library function that returns the text to print
+//! (so tests call them directly; `main.rs` only parses flags): [`data`] (render,
+//! convert, coco-eval, render/COCO benches), [`train`] (train, eval, predict) and
+//! [`bench`] (model bench, ablation, sweep).
+
+#[cfg(feature = "train")]
+pub mod bench;
+pub mod data;
+#[cfg(feature = "train")]
+pub mod train;

@@ -1,0 +1,300 @@
+//! Run configuration: TOML → typed structs → validated values.
+//!
+//! Every table rejects unknown keys (`deny_unknown_fields`), so a typo such as
+//! `epoch = 5` fails with the key's name, the file and the line instead of silently
+//! training with the default. `--set a.b=v` overrides edit the TOML tree before it is
+//! typed, so they go through exactly the same checks.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+
+mod data;
+mod model;
+mod shipped;
+mod train;
+
+pub use data::{DataConfig, RealConfig, RealKind};
+pub use model::{
+    MaskRcnnModelConfig, MaskRcnnPreset, ModelConfig, ModelKind, YoloModelConfig, YoloScale,
+};
+pub use shipped::SHIPPED;
+pub use train::{OptimizerKind, ScheduleKind, TrainConfig};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DeviceKind {
+    Flex,
+    Ndarray,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Run name: outputs go to `runs/<name>/`.
+    pub name: String,
+    #[serde(default)]
+    pub seed: u64,
+    #[serde(default = "default_device")]
+    pub device: DeviceKind,
+    pub data: DataConfig,
+    #[serde(default)]
+    pub model: ModelConfig,
+    #[serde(default)]
+    pub train: TrainConfig,
+}
+
+fn default_device() -> DeviceKind {
+    DeviceKind::Flex
+}
+
+/// Finds a config: an existing path, else a shipped config by name (`yolo_syn1000` or
+/// `yolo_syn1000.toml`). Returns the text and where it came from.
+pub fn locate(name: &str) -> Result<(String, String)> {
+    let path = Path::new(name);
+    if path.exists() {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read config {}", path.display()))?;
+        return Ok((text, path.display().to_string()));
+    }
+    let file = path
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let want = if file.ends_with(".toml") {
+        file
+    } else {
+        format!("{file}.toml")
+    };
+    if let Some((n, text)) = SHIPPED.iter().find(|(n, _)| *n == want) {
+        return Ok((text.to_string(), format!("<shipped>/configs/{n}")));
+    }
+    let names: Vec<&str> = SHIPPED.iter().map(|(n, _)| *n).collect();
+    bail!(
+        "config {name:?} is neither a file nor a shipped config (shipped: {})",
+        names.join(", ")
+    )
+}
+
+/// Parses, applies `key.path=value` overrides, types and validates a config.
+pub fn load(name: &str, overrides: &[String]) -> Result<Config> {
+    let (text, origin) = locate(name)?;
+    parse(&text, &origin, overrides)
+}
+
+pub fn parse(text: &str, origin: &str, overrides: &[String]) -> Result<Config> {
+    let mut tree: toml::Table =
+        toml::from_str(text).with_context(|| format!("config {origin} is not valid TOML"))?;
+    // Typed from text (not from the tree) so errors quote the offending `key = value`
+    // line; with overrides, from the re-serialised tree, which quotes the override.
+    for o in overrides {
+        apply_override(&mut tree, o).with_context(|| format!("bad override --set {o}"))?;
+    }
+    // `[model]` without `kind` is a YOLO, as in ultralytics.
+    let default_kind = match tree.get_mut("model").and_then(|m| m.as_table_mut()) {
+        Some(m) if !m.contains_key("kind") => {
+            m.insert("kind".into(), toml::Value::String("yolo".into()));
+            true
+        }
+        _ => false,
+    };
+    let typed_text = if overrides.is_empty() && !default_kind {
+        text.to_string()
+    } else {
+        toml::to_string(&tree)?
+    };
+    let cfg: Config = toml::from_str(&typed_text).with_context(|| {
+        if overrides.is_empty() {
+            format!("in config {origin}")
+        } else {
+            format!("in config {origin} with overrides {}", overrides.join(" "))
+        }
+    })?;
+    cfg.validate()
+        .with_context(|| format!("in config {origin}"))?;
+    Ok(cfg)
+}
+
+fn apply_override(tree: &mut toml::Table, o: &str) -> Result<()> {
+    let (key, raw) = o
+        .split_once('=')
+        .context("expected KEY=VALUE, e.g. train.epochs=5")?;
+    let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {raw}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(raw.to_string()));
+    let parts: Vec<&str> = key.trim().split('.').collect();
+    let mut table = tree;
+    for p in &parts[..parts.len() - 1] {
+        table = table
+            .entry(p.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+            .as_table_mut()
+            .with_context(|| format!("{p} is not a table"))?;
+    }
+    table.insert(parts[parts.len() - 1].to_string(), value);
+    Ok(())
+}
+
+impl Config {
+    /// Range and consistency checks, with messages that say what to change.
+    pub fn validate(&self) -> Result<()> {
+        if self.name.is_empty() || self.name.contains(['/', '\\']) {
+            bail!("name {:?} must be a non-empty folder name", self.name);
+        }
+        self.data.validate()?;
+        self.train.validate()?;
+        self.model.validate(self.data.crop)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_configs_parse_and_validate() {
+        for (name, text) in SHIPPED {
+            parse(text, name, &[]).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+        }
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let base = SHIPPED[0].1;
+        let cases: Vec<(String, Vec<String>, &str)> = vec![
+            (
+                format!("{base}\nepoch = 3\n"),
+                vec![],
+                "unknown field `epoch`",
+            ),
+            (
+                base.replace("[train]", "[train]\nepoch = 3"),
+                vec![],
+                "unknown field `epoch`",
+            ),
+            (
+                base.to_string(),
+                vec!["train.epochs=0".into()],
+                "train.epochs",
+            ),
+            (
+                base.to_string(),
+                vec!["train.epochs=-3".into()],
+                "epochs = -3",
+            ),
+            (
+                base.to_string(),
+                vec!["train.lr=\"fast\"".into()],
+                "invalid type",
+            ),
+            (
+                base.to_string(),
+                vec!["data.image_size=100".into()],
+                "data.image_size",
+            ),
+            (
+                base.to_string(),
+                vec!["model.scale=\"x\"".into()],
+                "unknown variant `x`, expected `n` or `s`",
+            ),
+            (
+                base.to_string(),
+                vec!["data.real.kind=\"coco\"".into()],
+                "data.real.annotations",
+            ),
+            (
+                base.to_string(),
+                vec![
+                    "data.real.kind=\"labelme\"".into(),
+                    "data.real.dir=\"/nonexistent/x\"".into(),
+                ],
+                "does not exist",
+            ),
+            ("name = ".to_string(), vec![], "not valid TOML"),
+        ];
+        for (text, ov, needle) in cases {
+            let err = format!("{:#}", parse(&text, "test.toml", &ov).unwrap_err());
+            assert!(err.contains(needle), "{err:?} should mention {needle:?}");
+            assert!(err.contains("test.toml"), "{err:?} should name the file");
+        }
+    }
+
+    #[test]
+    fn model_keys_belong_to_their_kind() {
+        let yolo = SHIPPED[0].1;
+        let (mrcnn, _) = locate("maskrcnn_r101_syn1000").unwrap();
+        let cases: Vec<(&str, Vec<String>, &str)> = vec![
+            (yolo, vec!["model.depth=50".into()], "unknown field `depth`"),
+            (
+                &mrcnn,
+                vec!["model.scale=\"n\"".into()],
+                "unknown field `scale`",
+            ),
+            (
+                &mrcnn,
+                vec!["model.depth=42".into()],
+                "model.depth = 42 must be 18, 34, 50 or 101",
+            ),
+            (
+                &mrcnn,
+                vec!["model.anchor_sizes=[8.0, 16.0]".into()],
+                "model.anchor_sizes",
+            ),
+            (
+                &mrcnn,
+                vec!["model.roi_batch=0".into()],
+                "model.roi_batch = 0",
+            ),
+            (
+                &mrcnn,
+                vec!["model.preset=\"huge\"".into()],
+                "unknown variant",
+            ),
+            (
+                yolo,
+                vec!["model.kind=\"mlp\"".into()],
+                "unknown variant `mlp`",
+            ),
+        ];
+        for (text, ov, needle) in cases {
+            let err = format!("{:#}", parse(text, "test.toml", &ov).unwrap_err());
+            assert!(err.contains(needle), "{err:?} should mention {needle:?}");
+        }
+        // The resolved config (what a run folder holds) parses back to the same model.
+        let cfg = parse(&mrcnn, "m", &["model.depth=50".into()]).unwrap();
+        let ModelConfig::Maskrcnn(m) = &cfg.model else {
+            panic!("not a Mask R-CNN: {:?}", cfg.model)
+        };
+        assert_eq!((m.depth, m.preset), (50, MaskRcnnPreset::Compact));
+        let back = parse(&toml::to_string(&cfg).unwrap(), "resolved", &[]).unwrap();
+        assert_eq!(back.model, cfg.model);
+        assert_eq!(back.train.warmup_iters, 500);
+        let y = parse(yolo, "q", &[]).unwrap();
+        let ModelConfig::Yolo(m) = &y.model else {
+            panic!("not a YOLO: {:?}", y.model)
+        };
+        assert_eq!((m.scale, m.prototypes), (YoloScale::N, 32));
+        // A `[model]` table without `kind` is a YOLO with every default written out.
+        let no_kind = parse(&yolo.replace("kind = \"yolo\"", ""), "k", &[]).unwrap();
+        assert_eq!(no_kind.model, y.model);
+        let text = toml::to_string(&no_kind.model).unwrap();
+        assert!(
+            text.starts_with("kind = \"yolo\"\nwidth_mult = 1.0\nscale = \"n\""),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn overrides_set_nested_keys() {
+        let cfg = parse(
+            SHIPPED[0].1,
+            "q",
+            &["train.epochs=5".into(), "data.synthetic=7".into()],
+        )
+        .unwrap();
+        assert_eq!(cfg.train.epochs, 5);
+        assert_eq!(cfg.data.synthetic, 7);
+    }
+}

@@ -1,0 +1,214 @@
+//! `[model]`: one typed table per model family, picked by `kind`.
+
+use anyhow::{bail, Result};
+use serde::{Deserialize, Serialize};
+
+/// The model family of a config or checkpoint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ModelKind {
+    Yolo,
+    Maskrcnn,
+}
+
+/// `[model]`: one table per family, picked by `kind` (default `"yolo"`). Each family's
+/// table rejects unknown keys, so a key of the other family (`depth` under
+/// `kind = "yolo"`) is a parse error naming the key and its line.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum ModelConfig {
+    Yolo(YoloModelConfig),
+    Maskrcnn(MaskRcnnModelConfig),
+}
+
+impl Default for ModelConfig {
+    fn default() -> Self {
+        ModelConfig::Yolo(YoloModelConfig::default())
+    }
+}
+
+impl ModelConfig {
+    pub fn kind(&self) -> ModelKind {
+        match self {
+            ModelConfig::Yolo(_) => ModelKind::Yolo,
+            ModelConfig::Maskrcnn(_) => ModelKind::Maskrcnn,
+        }
+    }
+
+    /// Channel-width multiplier of either family.
+    pub fn width_mult(&self) -> f64 {
+        match self {
+            ModelConfig::Yolo(m) => m.width_mult,
+            ModelConfig::Maskrcnn(m) => m.width_mult,
+        }
+    }
+}
+
+/// YOLO11-seg size preset (ultralytics' `n` and `s`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum YoloScale {
+    #[default]
+    N,
+    S,
+}
+
+/// `[model]` with `kind = "yolo"`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct YoloModelConfig {
+    #[serde(default = "default_one")]
+    pub width_mult: f64,
+    #[serde(default)]
+    pub scale: YoloScale,
+    /// Head levels: `[3, 4, 5]` (P3–P5, ultralytics) or `[4, 5]` (scene-sized).
+    #[serde(default = "default_levels")]
+    pub levels: Vec<u32>,
+    #[serde(default = "default_true")]
+    pub c2psa: bool,
+    /// Mask prototypes (ultralytics: 32).
+    #[serde(default = "default_prototypes")]
+    pub prototypes: usize,
+}
+
+impl Default for YoloModelConfig {
+    fn default() -> Self {
+        toml::from_str("").expect("yolo model defaults")
+    }
+}
+
+fn default_levels() -> Vec<u32> {
+    vec![3, 4, 5]
+}
+fn default_prototypes() -> usize {
+    32
+}
+fn default_depth() -> usize {
+    50
+}
+
+/// Size preset of a Mask R-CNN: `compact` (CPU- and scene-sized) or `paper` (detectron2's
+/// R-FPN sizes). Single `model.*` keys override either.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MaskRcnnPreset {
+    #[default]
+    Compact,
+    Paper,
+}
+
+/// `[model]` with `kind = "maskrcnn"`: depth and preset, and optional overrides of the
+/// preset's sizes (unset keys keep the preset's value).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaskRcnnModelConfig {
+    #[serde(default = "default_one")]
+    pub width_mult: f64,
+    /// ResNet depth: 18, 34, 50 or 101.
+    #[serde(default = "default_depth")]
+    pub depth: usize,
+    #[serde(default)]
+    pub preset: MaskRcnnPreset,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fpn_channels: Option<usize>,
+    /// Anchor sizes in input pixels, one per level P2…P6.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub anchor_sizes: Option<Vec<f32>>,
+    /// Anchors sampled per image for the RPN loss.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_batch: Option<usize>,
+    /// RPN proposals per level before NMS and per image after NMS, in training.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_pre_nms_topk_train: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_post_nms_topk_train: Option<usize>,
+    /// The same at inference.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_pre_nms_topk_test: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpn_post_nms_topk_test: Option<usize>,
+    /// RoIs sampled per image for the box and mask losses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roi_batch: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub box_fc_dim: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask_conv_dim: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask_class_agnostic: Option<bool>,
+}
+
+impl Default for MaskRcnnModelConfig {
+    fn default() -> Self {
+        toml::from_str("").expect("maskrcnn model defaults")
+    }
+}
+
+fn default_true() -> bool {
+    true
+}
+fn default_one() -> f64 {
+    1.0
+}
+
+impl ModelConfig {
+    /// Range checks of the family's keys; `crop` is `data.crop` (a Mask R-CNN needs 64).
+    pub fn validate(&self, crop: u32) -> Result<()> {
+        let m = self;
+        let d_crop = crop;
+        let wm = m.width_mult();
+        if !(wm.is_finite() && wm > 0.0 && wm <= 4.0) {
+            bail!("model.width_mult = {wm} must be in (0, 4]");
+        }
+        match m {
+            ModelConfig::Yolo(m) => {
+                if m.levels != [3, 4, 5] && m.levels != [4, 5] {
+                    bail!("model.levels = {:?} must be [3, 4, 5] or [4, 5]", m.levels);
+                }
+                if !(1..=256).contains(&m.prototypes) {
+                    bail!("model.prototypes = {} must be in 1..=256", m.prototypes);
+                }
+            }
+            ModelConfig::Maskrcnn(m) => {
+                if ![18, 34, 50, 101].contains(&m.depth) {
+                    bail!("model.depth = {} must be 18, 34, 50 or 101", m.depth);
+                }
+                if d_crop < 64 {
+                    bail!(
+                        "data.crop = {} must be at least 64 for model.kind = \"maskrcnn\"",
+                        d_crop
+                    );
+                }
+                if let Some(a) = &m.anchor_sizes {
+                    if a.len() != 5 || a.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+                        bail!(
+                            "model.anchor_sizes = {a:?} must be 5 positive sizes in pixels (P2…P6)"
+                        );
+                    }
+                }
+                for (k, v, max) in [
+                    ("fpn_channels", m.fpn_channels, 1024),
+                    ("rpn_batch", m.rpn_batch, 4096),
+                    ("rpn_pre_nms_topk_train", m.rpn_pre_nms_topk_train, 100_000),
+                    (
+                        "rpn_post_nms_topk_train",
+                        m.rpn_post_nms_topk_train,
+                        100_000,
+                    ),
+                    ("rpn_pre_nms_topk_test", m.rpn_pre_nms_topk_test, 100_000),
+                    ("rpn_post_nms_topk_test", m.rpn_post_nms_topk_test, 100_000),
+                    ("roi_batch", m.roi_batch, 4096),
+                    ("box_fc_dim", m.box_fc_dim, 8192),
+                    ("mask_conv_dim", m.mask_conv_dim, 1024),
+                ] {
+                    if let Some(v) = v {
+                        if !(1..=max).contains(&v) {
+                            bail!("model.{k} = {v} must be in 1..={max}");
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,162 @@
+//! `[train]`: optimiser, schedule, EMA, clipping and augmentation settings.
+
+use anyhow::{bail, Result};
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OptimizerKind {
+    Sgd,
+    Adamw,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScheduleKind {
+    Linear,
+    Cosine,
+    Multistep,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainConfig {
+    #[serde(default = "default_epochs")]
+    pub epochs: usize,
+    #[serde(default = "default_batch")]
+    pub batch: usize,
+    #[serde(default = "default_optimizer")]
+    pub optimizer: OptimizerKind,
+    #[serde(default = "default_lr")]
+    pub lr: f64,
+    /// Final learning rate as a fraction of `lr` (linear / cosine).
+    #[serde(default = "default_lrf")]
+    pub lrf: f64,
+    #[serde(default = "default_momentum")]
+    pub momentum: f64,
+    #[serde(default = "default_wd")]
+    pub weight_decay: f64,
+    #[serde(default)]
+    pub nesterov: bool,
+    #[serde(default = "default_warmup")]
+    pub warmup_epochs: f64,
+    /// Learning rate biases start warmup at, falling linearly to `lr` (ultralytics'
+    /// `warmup_bias_lr`, 0.1 in its SGD recipe; 0 = biases warm up like weights).
+    #[serde(default)]
+    pub warmup_bias_lr: f64,
+    /// Warmup length in iterations (the Mask R-CNN paper: 500); when > 0 it replaces
+    /// `warmup_epochs`.
+    #[serde(default)]
+    pub warmup_iters: usize,
+    #[serde(default = "default_schedule")]
+    pub schedule: ScheduleKind,
+    /// Multistep: epochs where the learning rate drops ×0.1 (paper: 30, 60, 100).
+    #[serde(default = "default_milestones")]
+    pub milestones: Vec<usize>,
+    /// Global gradient-norm clip (ultralytics uses 10).
+    #[serde(default = "default_clip")]
+    pub grad_clip: f64,
+    #[serde(default = "default_true")]
+    pub ema: bool,
+    #[serde(default = "default_fliplr")]
+    pub fliplr: f64,
+    /// HSV jitter gains (ultralytics: 0.015, 0.7, 0.4).
+    #[serde(default = "default_hsv")]
+    pub hsv: [f64; 3],
+}
+
+fn default_epochs() -> usize {
+    200
+}
+fn default_batch() -> usize {
+    8
+}
+fn default_optimizer() -> OptimizerKind {
+    OptimizerKind::Sgd
+}
+fn default_lr() -> f64 {
+    0.01
+}
+fn default_lrf() -> f64 {
+    0.01
+}
+fn default_momentum() -> f64 {
+    0.937
+}
+fn default_wd() -> f64 {
+    5e-4
+}
+fn default_warmup() -> f64 {
+    3.0
+}
+fn default_schedule() -> ScheduleKind {
+    ScheduleKind::Linear
+}
+fn default_milestones() -> Vec<usize> {
+    vec![30, 60, 100]
+}
+fn default_clip() -> f64 {
+    10.0
+}
+fn default_fliplr() -> f64 {
+    0.5
+}
+fn default_hsv() -> [f64; 3] {
+    [0.015, 0.7, 0.4]
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        toml::from_str("").expect("train defaults")
+    }
+}
+
+impl TrainConfig {
+    /// Range checks, with messages that say what to change.
+    pub fn validate(&self) -> Result<()> {
+        let t = self;
+        if t.epochs == 0 {
+            bail!("train.epochs must be at least 1");
+        }
+        if t.batch == 0 {
+            bail!("train.batch must be at least 1");
+        }
+        for (k, v) in [("train.lr", t.lr), ("train.lrf", t.lrf)] {
+            if !(v.is_finite() && v > 0.0) {
+                bail!("{k} = {v} must be a positive number");
+            }
+        }
+        if !(0.0..1.0).contains(&t.momentum) {
+            bail!("train.momentum = {} must be in [0, 1)", t.momentum);
+        }
+        if !(t.weight_decay.is_finite() && t.weight_decay >= 0.0) {
+            bail!("train.weight_decay = {} must be >= 0", t.weight_decay);
+        }
+        if !(t.warmup_epochs.is_finite() && t.warmup_epochs >= 0.0) {
+            bail!("train.warmup_epochs = {} must be >= 0", t.warmup_epochs);
+        }
+        if !(t.warmup_bias_lr.is_finite() && (0.0..=1.0).contains(&t.warmup_bias_lr)) {
+            bail!(
+                "train.warmup_bias_lr = {} must be in [0, 1]",
+                t.warmup_bias_lr
+            );
+        }
+        if !(t.grad_clip.is_finite() && t.grad_clip > 0.0) {
+            bail!("train.grad_clip = {} must be positive", t.grad_clip);
+        }
+        if !(0.0..=1.0).contains(&t.fliplr) {
+            bail!("train.fliplr = {} must be a probability", t.fliplr);
+        }
+        if t.hsv.iter().any(|v| !(0.0..=1.0).contains(v)) {
+            bail!("train.hsv = {:?} must be three gains in [0, 1]", t.hsv);
+        }
+        if t.milestones.windows(2).any(|w| w[0] >= w[1]) {
+            bail!("train.milestones = {:?} must be increasing", t.milestones);
+        }
+        Ok(())
+    }
+}
+
+fn default_true() -> bool {
+    true
+}

@@ -1,0 +1,71 @@
+//! What every model family predicts ([`Detection`]) and the box arithmetic both
+//! postprocesses share: IoU of two boxes and greedy NMS.
+
+/// Offset that separates classes in the coordinate space of class-wise NMS (ultralytics'
+/// `max_wh`).
+pub const MAX_WH: f32 = 7680.0;
+/// At most this many boxes enter NMS per image (ultralytics' `max_nms`).
+pub const MAX_NMS: usize = 30_000;
+
+/// One detected instance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Detection {
+    /// `[x, y, width, height]` in input pixels (COCO order).
+    pub bbox: [f32; 4],
+    pub score: f32,
+    pub class: usize,
+    /// Row-major `H × W` at the input size, 1 inside the instance.
+    pub mask: Vec<u8>,
+}
+
+/// IoU of two xyxy boxes (no +1, no eps: zero-area pairs give 0).
+pub fn box_iou(a: [f32; 4], b: [f32; 4]) -> f32 {
+    let iw = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);
+    let ih = (a[3].min(b[3]) - a[1].max(b[1])).max(0.0);
+    let inter = iw * ih;
+    let union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter;
+    if union > 0.0 {
+        inter / union
+    } else {
+        0.0
+    }
+}
+
+/// Greedy class-wise NMS. `cands` are `(xyxy, score, class)`; returns kept indices in
+/// descending score order (ties: lower index first), at most `max_det`. Candidates with a
+/// NaN score or a non-finite coordinate (a diverged model's output) are never kept: they
+/// would rank first under `total_cmp` and reach results.json as `null`.
+pub fn nms(cands: &[([f32; 4], f32, usize)], iou: f32, max_det: usize) -> Vec<usize> {
+    if max_det == 0 {
+        return Vec::new();
+    }
+    let mut order: Vec<usize> = (0..cands.len())
+        .filter(|&i| !cands[i].1.is_nan() && cands[i].0.iter().all(|v| v.is_finite()))
+        .collect();
+    order.sort_by(|&i, &j| cands[j].1.total_cmp(&cands[i].1).then(i.cmp(&j)));
+    order.truncate(MAX_NMS);
+    let shifted: Vec<[f32; 4]> = cands
+        .iter()
+        .map(|(b, _, c)| {
+            let o = *c as f32 * MAX_WH;
+            [b[0] + o, b[1] + o, b[2] + o, b[3] + o]
+        })
+        .collect();
+    let mut keep = Vec::new();
+    let mut suppressed = vec![false; cands.len()];
+    for (rank, &i) in order.iter().enumerate() {
+        if suppressed[i] {
+            continue;
+        }
+        keep.push(i);
+        if keep.len() == max_det {
+            break;
+        }
+        for &j in &order[rank + 1..] {
+            if !suppressed[j] && box_iou(shifted[i], shifted[j]) > iou {
+                suppressed[j] = true;
+            }
+        }
+    }
+    keep
+}

@@ -1,0 +1,35 @@
+//! `--smoke`: any config shrunk to about a minute that still goes through every stage.
+
+use crate::config::{Config, ModelConfig};
+
+/// 64 px images (no crop), at most 9 real and 4 synthetic images, 2 epochs, batch 4.
+/// A Mask R-CNN keeps its depth (so the R101 code paths run) but gets quarter widths,
+/// anchors sized for 64 px and a few dozen proposals and RoIs.
+pub fn smoke_config(cfg: &mut Config) {
+    cfg.name = format!("{}_smoke", cfg.name);
+    let d = &mut cfg.data;
+    d.image_size = 64;
+    d.crop = 64;
+    d.real.count = d.real.count.min(9);
+    d.real.limit = Some(d.real.limit.unwrap_or(9).min(9));
+    d.synthetic = d.synthetic.min(4);
+    let t = &mut cfg.train;
+    t.epochs = t.epochs.min(2);
+    t.batch = t.batch.min(4);
+    t.warmup_epochs = t.warmup_epochs.min(1.0);
+    t.warmup_iters = t.warmup_iters.min(2);
+    t.milestones.retain(|&m| m < t.epochs);
+    if let ModelConfig::Maskrcnn(m) = &mut cfg.model {
+        m.width_mult = m.width_mult.min(0.25);
+        m.fpn_channels = Some(32);
+        m.anchor_sizes = Some(vec![12.0, 24.0, 48.0, 96.0, 192.0]);
+        m.rpn_batch = Some(64);
+        m.rpn_pre_nms_topk_train = Some(200);
+        m.rpn_post_nms_topk_train = Some(50);
+        m.rpn_pre_nms_topk_test = Some(200);
+        m.rpn_post_nms_topk_test = Some(50);
+        m.roi_batch = Some(32);
+        m.box_fc_dim = Some(64);
+        m.mask_conv_dim = Some(32);
+    }
+}
