@@ -331,41 +331,9 @@ enum ConvertWhat {
     },
 }
 
-fn run(cli: Cli) -> anyhow::Result<String> {
-    match cli.command {
-        None => match cli.train.config {
-            Some(_) => cli.train.run(),
-            None => anyhow::bail!("nothing to do: give --config FILE or a subcommand (see --help)"),
-        },
-        Some(Command::Train(t)) => t.run(),
-        Some(Command::Eval {
-            checkpoint,
-            split,
-            data,
-            json,
-            device,
-        }) => train_cmd::eval_cmd(
-            &checkpoint,
-            split,
-            data.as_deref(),
-            device.map(Into::into),
-            json,
-        ),
-        Some(Command::Predict {
-            checkpoint,
-            input,
-            out,
-            device,
-        }) => train_cmd::predict_cmd(&checkpoint, &input, &out, device.map(Into::into)),
-        Some(Command::Render {
-            out,
-            count,
-            seed,
-            size,
-            preset,
-            carcass,
-        }) => data::render(&out, count, seed, size, &preset, carcass),
-        Some(Command::Bench { what }) => match what {
+impl BenchWhat {
+    fn run(self) -> anyhow::Result<String> {
+        match self {
             BenchWhat::Coco { gt, dt, repeats } => data::bench_coco(&gt, &dt, repeats),
             BenchWhat::Render {
                 size,
@@ -423,7 +391,45 @@ fn run(cli: Cli) -> anyhow::Result<String> {
                 effort,
                 device,
             } => bench_cmd::model_worker(&variant, size, effort.into(), device.into()),
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<String> {
+    match cli.command {
+        None => match cli.train.config {
+            Some(_) => cli.train.run(),
+            None => anyhow::bail!("nothing to do: give --config FILE or a subcommand (see --help)"),
         },
+        Some(Command::Train(t)) => t.run(),
+        Some(Command::Eval {
+            checkpoint,
+            split,
+            data,
+            json,
+            device,
+        }) => train_cmd::eval_cmd(
+            &checkpoint,
+            split,
+            data.as_deref(),
+            device.map(Into::into),
+            json,
+        ),
+        Some(Command::Predict {
+            checkpoint,
+            input,
+            out,
+            device,
+        }) => train_cmd::predict_cmd(&checkpoint, &input, &out, device.map(Into::into)),
+        Some(Command::Render {
+            out,
+            count,
+            seed,
+            size,
+            preset,
+            carcass,
+        }) => data::render(&out, count, seed, size, &preset, carcass),
+        Some(Command::Bench { what }) => what.run(),
         Some(Command::CocoEval {
             gt,
             dt,

@@ -4,7 +4,7 @@
 //!
 //! It imports nothing from the rest of the crate but [`crate::util`], so the renderer
 //! (which writes COCO) and the evaluator (which reads it) sit above it, and the training
-//! loader in [`crate::data`] above the renderer.
+//! loader (`data/`) above the renderer.
 
 pub mod coco;
 pub mod image_file;

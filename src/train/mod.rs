@@ -3,7 +3,7 @@
 //! ([`schedule`]), optimisers and global-norm clipping ([`optim`]), weight EMA ([`ema`]),
 //! divergence stop ([`divergence`]), checkpoint files ([`checkpoint`]), the run folder's
 //! other files ([`run_files`]), per-epoch COCO evaluation ([`evaluate`]) and plots
-//! ([`plot`]). The commands built on it live in [`crate::commands`].
+//! ([`plot`]). The commands built on it live in `commands/`, above it.
 
 pub mod checkpoint;
 pub mod detector;

@@ -231,6 +231,10 @@ struct Run<'a> {
     split: &'a Split,
     mcfg: &'a DetectorConfig,
     class_names: Vec<String>,
+    /// The plain (no autodiff) device that evaluates.
+    base: &'a Device,
+    /// Network input size.
+    input: usize,
 }
 
 impl Run<'_> {
@@ -249,6 +253,85 @@ impl Run<'_> {
             best_fitness: st.best_fitness,
             val,
         }
+    }
+
+    /// Ctrl-C: saves `last.bpk` as it is now and returns the error that stops the run.
+    /// Completed epochs stay `epoch`: --resume redoes this one from its start, with the
+    /// weights, optimiser state and EMA as they are now.
+    fn save_interrupted(&self, st: &TrainState, epoch: usize, step: usize) -> anyhow::Error {
+        let p = self.run_dir.join("last.bpk");
+        let saved = module_bytes(&st.eval_model(self.cfg.train.ema))
+            .and_then(|b| st.last_checkpoint(self.header(st, epoch, None), b))
+            .and_then(|ck| ck.save(&p));
+        match saved {
+            Ok(()) => anyhow::anyhow!(
+                "interrupted (Ctrl-C) at epoch {}, step {step}; saved {} — continue with the same command plus --resume",
+                epoch + 1,
+                p.display()
+            ),
+            Err(e) => e.context(format!("interrupted (Ctrl-C) at epoch {}, step {step}", epoch + 1)),
+        }
+    }
+
+    /// After the steps of `epoch` (started at `te`, steps done after `t_train` s):
+    /// weight checks, validation, the epoch's record in the run files, `best.bpk` when
+    /// validation segm AP improved and `last.bpk`. Returns whether it improved.
+    fn finish_epoch(
+        &self,
+        st: &mut TrainState,
+        steps: &EpochSteps,
+        epoch: usize,
+        te: Instant,
+        t_train: f64,
+    ) -> Result<bool> {
+        let (cfg, loss_names) = (self.cfg, st.model.loss_names());
+        check_weights(&st.model.valid(), "model", epoch)?;
+        if cfg.train.ema {
+            check_weights(&st.ema.model, "EMA", epoch)?;
+        }
+        let eval_model = st.eval_model(cfg.train.ema);
+        let (val, _) = evaluate_ids(
+            &eval_model,
+            self.real,
+            &self.split.val,
+            self.input,
+            self.base,
+        )?;
+        let n_items = self.split.train.len() + cfg.data.synthetic;
+        let n = steps.steps.max(1) as f64;
+        st.records.push(EpochRecord {
+            epoch: epoch + 1,
+            images_per_s: (steps.steps * cfg.train.batch).min(n_items) as f64 / t_train.max(1e-9),
+            loss: loss_names
+                .iter()
+                .zip(&steps.sums)
+                .map(|(k, s)| (k.to_string(), s / n))
+                .collect(),
+            lr: steps.last_lr,
+            proxy: self.real.proxy,
+            time: te.elapsed().as_secs_f64(),
+            train_time: t_train,
+            val: StatsRecord::from(&val),
+        });
+        run_files::write_metrics(self.run_dir, &st.records, loss_names)?;
+
+        let improved = val.segm[0] > st.best_fitness;
+        if improved {
+            st.best_fitness = val.segm[0];
+            st.best_epoch = epoch + 1;
+        }
+        let eval_bytes = module_bytes(&eval_model)?;
+        let header = self.header(st, epoch + 1, Some(val));
+        if improved {
+            Checkpoint {
+                header: header.clone(),
+                sections: vec![("ema".into(), eval_bytes.clone())],
+            }
+            .save(&self.run_dir.join("best.bpk"))?;
+        }
+        st.last_checkpoint(header, eval_bytes)?
+            .save(&self.run_dir.join("last.bpk"))?;
+        Ok(improved)
     }
 }
 
@@ -348,34 +431,6 @@ fn run_epoch(
     Ok(out)
 }
 
-/// The epoch's record from its steps and validation stats.
-fn epoch_record(
-    epoch: usize,
-    steps: &EpochSteps,
-    loss_names: &[&str],
-    secs: f64,
-    t_train: f64,
-    images_per_s: f64,
-    val: &Stats,
-    proxy: bool,
-) -> EpochRecord {
-    let n = steps.steps.max(1) as f64;
-    EpochRecord {
-        epoch: epoch + 1,
-        images_per_s,
-        loss: loss_names
-            .iter()
-            .zip(&steps.sums)
-            .map(|(k, s)| (k.to_string(), s / n))
-            .collect(),
-        lr: steps.last_lr,
-        proxy,
-        time: secs,
-        train_time: t_train,
-        val: StatsRecord::from(val),
-    }
-}
-
 /// The line printed after an epoch.
 fn epoch_line(rec: &EpochRecord, epochs: usize, loss_names: &[&str], improved: bool) -> String {
     let (b, s) = (&rec.val.bbox.stats, &rec.val.segm.stats);
@@ -453,6 +508,8 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         split: &split,
         mcfg: &mcfg,
         class_names: real.class_names(),
+        base: &base,
+        input,
     };
     let loader = Loader {
         real: real.clone(),
@@ -465,7 +522,6 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         input: input as u32,
         seed: cfg.seed,
     };
-    let n_items = split.train.len() + cfg.data.synthetic;
     let (mut train_imgs, mut train_secs) = (0usize, 0f64);
     let guard_names: Vec<&str> = loss_names.iter().copied().chain(["total"]).collect();
     let mut guard = DivergenceGuard::new(&guard_names);
@@ -483,62 +539,16 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         )?;
         train_imgs += steps.images;
         if let Some(step) = steps.interrupted {
-            // Completed epochs stay `epoch`: --resume redoes this one from its start, with
-            // the weights, optimiser state and EMA as they are now.
-            let p = run_dir.join("last.bpk");
-            let eval_bytes = module_bytes(&st.eval_model(cfg.train.ema))?;
-            st.last_checkpoint(run.header(&st, epoch, None), eval_bytes)?
-                .save(&p)?;
-            bail!(
-                "interrupted (Ctrl-C) at epoch {}, step {step}; saved {} — continue with the same command plus --resume",
-                epoch + 1,
-                p.display()
-            );
+            return Err(run.save_interrupted(&st, epoch, step));
         }
         let t_train = te.elapsed().as_secs_f64();
         train_secs += t_train;
-        check_weights(&st.model.valid(), "model", epoch)?;
-        if cfg.train.ema {
-            check_weights(&st.ema.model, "EMA", epoch)?;
-        }
-
-        let eval_model = st.eval_model(cfg.train.ema);
-        let (val, _) = evaluate_ids(&eval_model, &real, &split.val, input, &base)?;
-        let images_per_s = (steps.steps * cfg.train.batch).min(n_items) as f64 / t_train.max(1e-9);
-        let rec = epoch_record(
-            epoch,
-            &steps,
-            loss_names,
-            te.elapsed().as_secs_f64(),
-            t_train,
-            images_per_s,
-            &val,
-            real.proxy,
-        );
-        st.records.push(rec);
-        run_files::write_metrics(&run_dir, &st.records, loss_names)?;
-
-        let improved = val.segm[0] > st.best_fitness;
-        if improved {
-            st.best_fitness = val.segm[0];
-            st.best_epoch = epoch + 1;
-        }
-        let eval_bytes = module_bytes(&eval_model)?;
-        let header = run.header(&st, epoch + 1, Some(val));
-        if improved {
-            Checkpoint {
-                header: header.clone(),
-                sections: vec![("ema".into(), eval_bytes.clone())],
-            }
-            .save(&run_dir.join("best.bpk"))?;
-        }
-        st.last_checkpoint(header, eval_bytes)?
-            .save(&run_dir.join("last.bpk"))?;
-        let rec = st.records.last().expect("pushed above");
+        let improved = run.finish_epoch(&mut st, &steps, epoch, te, t_train)?;
+        let rec = st.records.last().expect("finish_epoch pushed it");
         say(epoch_line(rec, cfg.train.epochs, loss_names, improved));
     }
 
-    let (test, best) = test_best(&run, &base)?;
+    let (test, best) = test_best(&run)?;
     plot::write_plots(&run_dir, &st.records, loss_names)?;
     Ok(TrainSummary {
         run_dir: run_dir.clone(),
@@ -554,11 +564,11 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
 
 /// Scores `best.bpk` on the test split and writes `test.json`; returns the stats and the
 /// checkpoint's epoch.
-fn test_best(run: &Run, base: &Device) -> Result<(Stats, usize)> {
+fn test_best(run: &Run) -> Result<(Stats, usize)> {
     let best = Checkpoint::load(&run.run_dir.join("best.bpk"))?;
-    let model = best.model("ema", base)?;
+    let model = best.model("ema", run.base)?;
     let input = best.header.model.input_size();
-    let (test, _) = evaluate_ids(&model, run.real, &run.split.test, input, base)?;
+    let (test, _) = evaluate_ids(&model, run.real, &run.split.test, input, run.base)?;
     run_files::write_test(
         run.run_dir,
         &TestRecord {
