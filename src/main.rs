@@ -41,24 +41,9 @@ struct TrainArgs {
     /// Continue the run from <run dir>/last.bpk.
     #[arg(long)]
     resume: bool,
-    /// Override the config's device.
-    #[arg(long, value_enum)]
-    device: Option<DeviceArg>,
-}
-
-#[derive(Clone, Copy, clap::ValueEnum)]
-enum DeviceArg {
-    Flex,
-    Ndarray,
-}
-
-impl From<DeviceArg> for DeviceKind {
-    fn from(d: DeviceArg) -> DeviceKind {
-        match d {
-            DeviceArg::Flex => DeviceKind::Flex,
-            DeviceArg::Ndarray => DeviceKind::Ndarray,
-        }
-    }
+    /// Override the config's device: flex, ndarray, cuda[:N] or wgpu.
+    #[arg(long)]
+    device: Option<DeviceKind>,
 }
 
 impl TrainArgs {
@@ -70,7 +55,7 @@ impl TrainArgs {
             run_dir: self.run_dir,
             resume: self.resume,
             smoke: self.smoke,
-            device: self.device.map(Into::into),
+            device: self.device,
             quiet: false,
         };
         train_cmd::train_cmd(&c, &self.set, &opts)
@@ -94,8 +79,8 @@ enum Command {
         /// Print {"bbox": {"stats": [12]}, "segm": {"stats": [12]}}.
         #[arg(long)]
         json: bool,
-        #[arg(long, value_enum)]
-        device: Option<DeviceArg>,
+        #[arg(long)]
+        device: Option<DeviceKind>,
     },
     /// Predict masks on an image or a folder of images: overlay PNGs + COCO results JSON.
     Predict {
@@ -106,8 +91,8 @@ enum Command {
         input: PathBuf,
         #[arg(long)]
         out: PathBuf,
-        #[arg(long, value_enum)]
-        device: Option<DeviceArg>,
+        #[arg(long)]
+        device: Option<DeviceKind>,
     },
     /// Render auto-labelled carcass piles: images/, annotations.json (COCO), preview.png.
     Render {
@@ -175,8 +160,8 @@ enum Command {
         /// missing ones (for a sweep split over several processes or cut short).
         #[arg(long)]
         no_train: bool,
-        #[arg(long, value_enum)]
-        device: Option<DeviceArg>,
+        #[arg(long)]
+        device: Option<DeviceKind>,
         /// No progress bars or per-epoch lines.
         #[arg(long)]
         quiet: bool,
@@ -244,8 +229,8 @@ enum BenchWhat {
         out: Option<PathBuf>,
         #[command(flatten)]
         effort: EffortArgs,
-        #[arg(long, value_enum, default_value = "flex")]
-        device: DeviceArg,
+        #[arg(long, default_value = "flex")]
+        device: DeviceKind,
         #[arg(long)]
         quiet: bool,
     },
@@ -273,8 +258,8 @@ enum BenchWhat {
         no_train: bool,
         #[command(flatten)]
         effort: EffortArgs,
-        #[arg(long, value_enum, default_value = "flex")]
-        device: DeviceArg,
+        #[arg(long, default_value = "flex")]
+        device: DeviceKind,
         #[arg(long)]
         quiet: bool,
     },
@@ -287,8 +272,8 @@ enum BenchWhat {
         size: usize,
         #[command(flatten)]
         effort: EffortArgs,
-        #[arg(long, value_enum, default_value = "flex")]
-        device: DeviceArg,
+        #[arg(long, default_value = "flex")]
+        device: DeviceKind,
     },
     /// Renderer speed: images/s with shadows and masks, and where the time goes.
     Render {
@@ -359,7 +344,7 @@ impl BenchWhat {
                 name,
                 out,
                 effort: effort.into(),
-                device: device.into(),
+                device,
                 quiet,
             }),
             BenchWhat::Ablation {
@@ -382,7 +367,7 @@ impl BenchWhat {
                 train_only,
                 no_train,
                 effort: effort.into(),
-                device: device.into(),
+                device,
                 quiet,
             }),
             BenchWhat::ModelWorker {
@@ -390,7 +375,7 @@ impl BenchWhat {
                 size,
                 effort,
                 device,
-            } => bench_cmd::model_worker(&variant, size, effort.into(), device.into()),
+            } => bench_cmd::model_worker(&variant, size, effort.into(), device),
         }
     }
 }
@@ -408,19 +393,13 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             data,
             json,
             device,
-        }) => train_cmd::eval_cmd(
-            &checkpoint,
-            split,
-            data.as_deref(),
-            device.map(Into::into),
-            json,
-        ),
+        }) => train_cmd::eval_cmd(&checkpoint, split, data.as_deref(), device, json),
         Some(Command::Predict {
             checkpoint,
             input,
             out,
             device,
-        }) => train_cmd::predict_cmd(&checkpoint, &input, &out, device.map(Into::into)),
+        }) => train_cmd::predict_cmd(&checkpoint, &input, &out, device),
         Some(Command::Render {
             out,
             count,
@@ -454,7 +433,7 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             smoke,
             out,
             no_train,
-            device: device.map(Into::into),
+            device,
             quiet,
         }),
         Some(Command::Convert { what }) => match what {

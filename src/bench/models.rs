@@ -374,7 +374,7 @@ pub fn measure(variant: &Variant, size: usize, e: Effort, device: &Device) -> Re
 /// `bench model-worker`: measures one (variant, size) and returns its JSON line.
 pub fn worker(variant: &str, size: usize, e: Effort, device: DeviceKind) -> Result<String> {
     let v: Variant = variant.parse()?;
-    let m = measure(&v, size, e, &device_of(device))?;
+    let m = measure(&v, size, e, &device_of(device)?)?;
     Ok(serde_json::to_string(&m)?)
 }
 
@@ -399,13 +399,9 @@ pub fn measure_in_child(
     e: Effort,
     device: DeviceKind,
 ) -> Result<Measurement> {
-    let dev = match device {
-        DeviceKind::Flex => "flex",
-        DeviceKind::Ndarray => "ndarray",
-    };
     let out = std::process::Command::new(exe)
         .args(["bench", "model-worker", "--variant", &variant.to_string()])
-        .args(["--size", &size.to_string(), "--device", dev])
+        .args(["--size", &size.to_string(), "--device", &device.to_string()])
         .args(effort_args(e))
         .output()
         .with_context(|| format!("cannot start {}", exe.display()))?;

@@ -159,7 +159,7 @@ pub fn predict_cmd(
     device: Option<DeviceKind>,
 ) -> Result<String> {
     let ck = Checkpoint::load(checkpoint)?;
-    let dev = device_of(device.unwrap_or(ck.header.config.device));
+    let dev = device_of(device.unwrap_or(ck.header.config.device))?;
     let model = ck
         .model("ema", &dev)
         .with_context(|| format!("in checkpoint {}", checkpoint.display()))?;

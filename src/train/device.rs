@@ -1,14 +1,106 @@
-//! The Burn device of a config's `device` key.
+//! The Burn device of a config's `device` key. GPU backends are cargo features (`cuda`,
+//! `wgpu`); a device the binary was not built for, or a GPU that is not there, is an
+//! error that says what to do — never a panic in the middle of a run.
 
+use anyhow::{bail, Result};
 use burn::tensor::Device;
 
 use crate::config::DeviceKind;
 
-/// The Burn device of a kind.
+/// The Burn device of a kind, checked to work: a GPU device runs one small operation
+/// first, so a missing driver or GPU fails here with a message rather than as a panic
+/// at the first training step.
 #[allow(deprecated)] // Device::ndarray: the trainer must still run there.
-pub fn device_of(kind: DeviceKind) -> Device {
+pub fn device_of(kind: DeviceKind) -> Result<Device> {
     match kind {
-        DeviceKind::Flex => Device::flex(),
-        DeviceKind::Ndarray => Device::ndarray(),
+        DeviceKind::Flex => Ok(Device::flex()),
+        DeviceKind::Ndarray => Ok(Device::ndarray()),
+        DeviceKind::Cuda(index) => cuda(index),
+        DeviceKind::Wgpu => wgpu(),
+    }
+}
+
+#[cfg(feature = "cuda")]
+fn cuda(index: usize) -> Result<Device> {
+    probe(
+        || Device::cuda(index),
+        &format!("cuda:{index}"),
+        "an NVIDIA driver (nvidia-smi lists the GPU) and the CUDA runtime libraries",
+    )
+}
+
+#[cfg(not(feature = "cuda"))]
+fn cuda(index: usize) -> Result<Device> {
+    bail!(
+        "device cuda:{index}: this chicktrain was built without the `cuda` feature; build it with `cargo build --release --features cuda` (running it needs an NVIDIA driver and the CUDA runtime libraries), or use --device flex"
+    )
+}
+
+#[cfg(feature = "wgpu")]
+fn wgpu() -> Result<Device> {
+    probe(
+        || Device::wgpu(burn::tensor::DeviceKind::DefaultDevice),
+        "wgpu",
+        "a Vulkan, Metal or DX12 driver (on Linux e.g. `vulkaninfo` lists a device)",
+    )
+}
+
+#[cfg(not(feature = "wgpu"))]
+fn wgpu() -> Result<Device> {
+    bail!(
+        "device wgpu: this chicktrain was built without the `wgpu` feature; build it with `cargo build --release --features wgpu` (running it needs a Vulkan, Metal or DX12 driver), or use --device flex"
+    )
+}
+
+/// Builds the device and runs `1 + 1` on it with the panic hook silenced: backends panic
+/// when no adapter or driver is found, which becomes an error naming `needs`.
+#[cfg(any(feature = "cuda", feature = "wgpu"))]
+fn probe(
+    make: impl Fn() -> Device + std::panic::UnwindSafe,
+    name: &str,
+    needs: &str,
+) -> Result<Device> {
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let r = std::panic::catch_unwind(|| {
+        let d = make();
+        let one = burn::tensor::Tensor::<1>::ones([1], &d);
+        let v = crate::util::tensor::to_host(one.clone() + one);
+        (d, v)
+    });
+    std::panic::set_hook(hook);
+    match r {
+        Ok((d, v)) if v == [2.0] => Ok(d),
+        Ok((_, v)) => bail!("device {name} computed 1 + 1 = {v:?}; its driver is broken"),
+        Err(p) => {
+            let why = p
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "no reason given".into());
+            bail!("device {name} is not usable ({why}); it needs {needs}, or use --device flex")
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cpu_devices_work_and_missing_features_are_named() {
+        for k in [DeviceKind::Flex, DeviceKind::Ndarray] {
+            device_of(k).unwrap();
+        }
+        #[cfg(not(feature = "cuda"))]
+        {
+            let e = device_of(DeviceKind::Cuda(1)).unwrap_err().to_string();
+            assert!(e.contains("cuda:1") && e.contains("--features cuda"), "{e}");
+        }
+        #[cfg(not(feature = "wgpu"))]
+        {
+            let e = device_of(DeviceKind::Wgpu).unwrap_err().to_string();
+            assert!(e.contains("--features wgpu"), "{e}");
+        }
     }
 }

@@ -162,7 +162,7 @@ pub fn score_checkpoint(
     device: Option<DeviceKind>,
 ) -> Result<Score> {
     let ck = Checkpoint::load(checkpoint)?;
-    let dev = device_of(device.unwrap_or(ck.header.config.device));
+    let dev = device_of(device.unwrap_or(ck.header.config.device))?;
     let (real, split_ids, origin) = match data {
         None => {
             let cfg = &ck.header.config;

@@ -485,7 +485,7 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         t0.elapsed().as_secs_f64()
     ));
 
-    let base = device_of(cfg.device);
+    let base = device_of(cfg.device)?;
     base.seed(cfg.seed);
     let ad = base.clone().autodiff();
     let mcfg = model_config(&cfg, real.num_classes())?;
@@ -582,4 +582,107 @@ fn test_best(run: &Run) -> Result<(Stats, usize)> {
         },
     )?;
     Ok((test, best.header.epoch))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{self, ModelConfig};
+    use crate::train::run_files::IouStats;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("ct-trainer-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    /// quickstart at 64 px with 4 proxy images and no renders, cache in `dir`.
+    fn tiny(dir: &Path, extra: &[&str]) -> Config {
+        let mut ov = vec![
+            format!("data.cache=\"{}\"", dir.join("cache").display()),
+            "data.image_size=64".into(),
+            "data.crop=64".into(),
+            "data.real.count=4".into(),
+            "data.synthetic=0".into(),
+        ];
+        ov.extend(extra.iter().map(|s| s.to_string()));
+        config::load("quickstart.toml", &ov).unwrap()
+    }
+
+    #[test]
+    fn prepare_run_applies_smoke_and_device_and_creates_the_folder() {
+        let dir = tmp("prepare");
+        let mut cfg = config::load("maskrcnn_r50_syn250.toml", &[]).unwrap();
+        cfg.train.epochs = 9;
+        let opts = TrainOptions {
+            run_dir: Some(dir.join("run")),
+            smoke: true,
+            device: Some(DeviceKind::Ndarray),
+            ..Default::default()
+        };
+        let (cfg, run_dir) = prepare_run(cfg, &opts).unwrap();
+        assert!(run_dir.is_dir() && run_dir == dir.join("run"));
+        assert_eq!((cfg.device, cfg.train.epochs), (DeviceKind::Ndarray, 2));
+        assert!(cfg.name.ends_with("_smoke"));
+        let ModelConfig::Maskrcnn(m) = &cfg.model else {
+            panic!("smoke changed the model kind")
+        };
+        assert_eq!((m.depth, m.fpn_channels), (50, Some(32)));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn resume_needs_a_last_checkpoint_and_says_so() {
+        let dir = tmp("resume");
+        std::fs::create_dir_all(&dir).unwrap();
+        let e = format!("{:#}", resume_point(&tiny(&dir, &[]), &dir).unwrap_err());
+        assert!(
+            e.contains("last.bpk") && e.contains("nothing to resume"),
+            "{e}"
+        );
+        std::fs::write(dir.join("last.bpk"), b"not a checkpoint").unwrap();
+        let e = format!("{:#}", resume_point(&tiny(&dir, &[]), &dir).unwrap_err());
+        assert!(e.contains("not a chicktrain checkpoint"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn load_data_splits_and_refuses_an_all_test_split() {
+        let dir = tmp("data");
+        let (real, split, synthetic) = load_data(&tiny(&dir, &[]), &dir, None).unwrap();
+        assert_eq!(real.ids(), [1, 2, 3, 4]);
+        assert_eq!(split.train.len() + split.val.len() + split.test.len(), 4);
+        assert!(dir.join("split.json").is_file());
+        assert_eq!(synthetic.count, 0);
+        // `[0, 0]` is an evaluation set (every image test), not something to train on.
+        let e = load_data(&tiny(&dir, &["data.split=[0.0, 0.0]"]), &dir, None).unwrap_err();
+        let e = format!("{e:#}");
+        assert!(e.contains("0 train / 0 val / 4 test"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn epoch_line_reports_every_term_and_the_best_mark() {
+        let mut segm = [0.0; 12];
+        segm[..2].copy_from_slice(&[0.5, 0.75]);
+        let rec = EpochRecord {
+            epoch: 3,
+            images_per_s: 6.5,
+            loss: [("box".to_string(), 1.25), ("seg".to_string(), 0.5)].into(),
+            lr: 0.01,
+            proxy: true,
+            time: 12.0,
+            train_time: 10.0,
+            val: StatsRecord {
+                bbox: IouStats { stats: [0.25; 12] },
+                segm: IouStats { stats: segm },
+            },
+        };
+        let line = epoch_line(&rec, 25, &["box", "seg"], true);
+        assert_eq!(
+            line,
+            "epoch 3/25  lr 1.00e-2  loss box 1.250 seg 0.500  12.0 s (6.50 img/s)  val bbox AP 0.250 AP50 0.250  segm AP 0.500 AP50 0.750  *best"
+        );
+        assert!(!epoch_line(&rec, 25, &["box", "seg"], false).contains("best"));
+    }
 }
