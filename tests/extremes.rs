@@ -7,18 +7,17 @@
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use chicktrain::model::detection::{box_iou, nms};
-use chicktrain::model::maskrcnn::anchors::AnchorConfig;
 use chicktrain::model::maskrcnn::box_coder::{clip_box, BoxCoder};
 use chicktrain::model::maskrcnn::losses::{bce_with_logits, cross_entropy, smooth_l1};
-use chicktrain::model::maskrcnn::mask_head::{mask_loss, MaskHeadConfig};
-use chicktrain::model::maskrcnn::roi_heads::RoiHeadsConfig;
-use chicktrain::model::maskrcnn::rpn::RpnConfig;
+use chicktrain::model::maskrcnn::mask_head::mask_loss;
 use chicktrain::model::maskrcnn::{ImageTargets, MaskRcnnConfig};
 use chicktrain::model::yolo::blocks::ConvBn;
 use chicktrain::model::yolo::postprocess::postprocess;
 use chicktrain::model::yolo::{AnchorGrid, Scale, YoloOutput, YoloSegConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+
+mod common;
 
 #[allow(deprecated)] // Device::ndarray: the trainer must still run there.
 fn devices() -> [(&'static str, Device); 2] {
@@ -98,32 +97,15 @@ fn batchnorm_with_batch_one_and_constant_input() {
 const SIZE: usize = 64;
 
 fn tiny_maskrcnn() -> MaskRcnnConfig {
-    MaskRcnnConfig::new(18, 1)
-        .with_width_mult(0.25)
-        .with_input_size(SIZE)
-        .with_fpn_channels(16)
-        .with_anchors(AnchorConfig {
-            sizes: vec![12.0, 24.0, 48.0, 96.0, 192.0],
-            ratios: vec![0.5, 1.0, 2.0],
-        })
-        .with_rpn(RpnConfig {
-            batch_per_image: 64,
-            pre_nms_topk_train: 200,
-            post_nms_topk_train: 50,
-            pre_nms_topk_test: 200,
-            post_nms_topk_test: 50,
-            ..RpnConfig::compact()
-        })
-        .with_roi(RoiHeadsConfig {
-            batch_per_image: 32,
-            fc_dim: 32,
-            ..RoiHeadsConfig::compact()
-        })
-        .with_mask(MaskHeadConfig {
-            conv_dim: 16,
-            num_conv: 1,
-            ..MaskHeadConfig::compact()
-        })
+    common::tiny::tiny_maskrcnn(
+        SIZE,
+        common::tiny::TinyWidths {
+            fpn: 16,
+            fc: 32,
+            mask_conv: 16,
+            mask_convs: 1,
+        },
+    )
 }
 
 fn mask_of(b: [f32; 4]) -> Vec<u8> {

@@ -13,13 +13,11 @@ use chicktrain::annotations::coco::{
 use chicktrain::annotations::mask::Mask;
 use chicktrain::annotations::rle::Rle;
 use chicktrain::eval::coco_eval::{evaluate, IouType};
-use chicktrain::model::maskrcnn::anchors::AnchorConfig;
-use chicktrain::model::maskrcnn::mask_head::MaskHeadConfig;
-use chicktrain::model::maskrcnn::roi_heads::RoiHeadsConfig;
-use chicktrain::model::maskrcnn::rpn::RpnConfig;
 use chicktrain::model::maskrcnn::{Detection, ImageTargets, MaskRcnn, MaskRcnnConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+
+mod common;
 
 const SIZE: usize = 64;
 const BATCH: usize = 2;
@@ -62,32 +60,15 @@ fn ellipses(seed: u64) -> (Vec<f32>, Vec<ImageTargets>) {
 }
 
 fn tiny_config() -> MaskRcnnConfig {
-    MaskRcnnConfig::new(18, 1)
-        .with_width_mult(0.25)
-        .with_input_size(SIZE)
-        .with_fpn_channels(32)
-        .with_anchors(AnchorConfig {
-            sizes: vec![12.0, 24.0, 48.0, 96.0, 192.0],
-            ratios: vec![0.5, 1.0, 2.0],
-        })
-        .with_rpn(RpnConfig {
-            batch_per_image: 64,
-            pre_nms_topk_train: 200,
-            post_nms_topk_train: 50,
-            pre_nms_topk_test: 200,
-            post_nms_topk_test: 50,
-            ..RpnConfig::compact()
-        })
-        .with_roi(RoiHeadsConfig {
-            batch_per_image: 32,
-            fc_dim: 64,
-            ..RoiHeadsConfig::compact()
-        })
-        .with_mask(MaskHeadConfig {
-            conv_dim: 32,
-            num_conv: 2,
-            ..MaskHeadConfig::compact()
-        })
+    common::tiny::tiny_maskrcnn(
+        SIZE,
+        common::tiny::TinyWidths {
+            fpn: 32,
+            fc: 64,
+            mask_conv: 32,
+            mask_convs: 2,
+        },
+    )
 }
 
 /// `steps` AdamW steps, then `calib` forward/backward passes without updates so that

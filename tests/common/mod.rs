@@ -1,5 +1,9 @@
-//! Helpers shared by the end-to-end tests that run the binary.
+//! Helpers shared by the test crates: running the binary (here), the `--smoke` scenario
+//! of the `train_*` tests ([`smoke`]) and the tiny Mask R-CNN of the model tests ([`tiny`]).
 #![allow(dead_code)] // each test crate uses its own subset
+
+pub mod smoke;
+pub mod tiny;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
