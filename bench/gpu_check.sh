@@ -8,16 +8,21 @@
 #   bash bench/gpu_check.sh [OUT_DIR]        (default runs/gpu_check)
 #
 # Needs: nvidia-smi, a CUDA driver, cargo. EPOCHS=N changes the protocol epochs (default 2).
+# FEATURE=wgpu DEVICE=wgpu runs the same check through wgpu (Vulkan) instead: the `cuda`
+# feature's build downloads an LLVM bundle (cubecl-llvm's build script), so on a machine
+# without network access only `wgpu` builds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-runs/gpu_check}
 EPOCHS=${EPOCHS:-2}
+FEATURE=${FEATURE:-cuda}
+DEVICE=${DEVICE:-cuda}
 mkdir -p "$OUT"
 log() { echo "[gpu_check $(date +%T)] $*" | tee -a "$OUT/report.txt"; }
 
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$OUT/gpu.txt"
-log "building with --features cuda"
-cargo build --release --features cuda 2>&1 | tail -3
+log "building with --features $FEATURE"
+cargo build --release --features "$FEATURE" 2>&1 | tail -3
 BIN=target/release/chicktrain
 [ -n "${CARGO_TARGET_DIR:-}" ] && BIN="$CARGO_TARGET_DIR/release/chicktrain"
 
@@ -33,27 +38,27 @@ PY
 }
 
 for cfg in quickstart.toml maskrcnn_r50_syn250.toml; do
-  log "smoke $cfg on cuda"
-  timeout 300 "$BIN" --config "$cfg" --smoke --device cuda --run-dir "$OUT/smoke_${cfg%.toml}" | tail -3
+  log "smoke $cfg on $DEVICE"
+  timeout 300 "$BIN" --config "$cfg" --smoke --device "$DEVICE" --run-dir "$OUT/smoke_${cfg%.toml}" | tail -3
 done
 
 for cfg in yolo_syn1000.toml maskrcnn_r50_syn750.toml; do
   name=${cfg%.toml}
-  log "paper protocol $cfg, $EPOCHS epochs on cuda"
+  log "paper protocol $cfg, $EPOCHS epochs on $DEVICE"
   peak_start "$name"
-  timeout 1200 "$BIN" --config "$cfg" --device cuda --set train.epochs="$EPOCHS" --run-dir "$OUT/$name" | tail -3
+  timeout 1200 "$BIN" --config "$cfg" --device "$DEVICE" --set train.epochs="$EPOCHS" --run-dir "$OUT/$name" | tail -3
   peak_stop "$name"
   log "$name: $(rates "$OUT/$name")"
 done
 
-log "one checkpoint scored on cuda and on flex (same weights, same images)"
+log "one checkpoint scored on $DEVICE and on flex (same weights, same images)"
 CK="$OUT/smoke_quickstart/best.bpk"
-"$BIN" eval --checkpoint "$CK" --split test --device cuda --json > "$OUT/eval_cuda.json"
+"$BIN" eval --checkpoint "$CK" --split test --device "$DEVICE" --json > "$OUT/eval_gpu.json"
 "$BIN" eval --checkpoint "$CK" --split test --device flex --json > "$OUT/eval_flex.json"
 python3 - "$OUT" <<'PY' | tee -a "$OUT/report.txt"
 import json, sys
-a = json.load(open(sys.argv[1] + "/eval_cuda.json")); b = json.load(open(sys.argv[1] + "/eval_flex.json"))
+a = json.load(open(sys.argv[1] + "/eval_gpu.json")); b = json.load(open(sys.argv[1] + "/eval_flex.json"))
 d = max(abs(x - y) for k in ("bbox", "segm") for x, y in zip(a[k]["stats"], b[k]["stats"]))
-print("cuda vs flex: max |stat difference| = %.5f (segm AP cuda %.4f, flex %.4f)" % (d, a["segm"]["stats"][0], b["segm"]["stats"][0]))
+print("gpu vs flex: max |stat difference| = %.5f (segm AP gpu %.4f, flex %.4f)" % (d, a["segm"]["stats"][0], b["segm"]["stats"][0]))
 PY
 log "done: $OUT/report.txt"
