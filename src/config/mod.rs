@@ -363,6 +363,19 @@ mod tests {
     }
 
     #[test]
+    fn an_all_test_split_is_valid_but_one_empty_part_is_not() {
+        let cfg = parse(SHIPPED[0].1, "q", &["data.split=[0.0, 0.0]".into()]).unwrap();
+        assert_eq!(cfg.data.split, [0.0, 0.0]);
+        for bad in ["[0.5, 0.0]", "[0.0, 0.5]", "[0.6, 0.4]"] {
+            let e = format!(
+                "{:#}",
+                parse(SHIPPED[0].1, "q.toml", &[format!("data.split={bad}")]).unwrap_err()
+            );
+            assert!(e.contains("data.split") && e.contains("[0, 0]"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
     fn overrides_set_nested_keys() {
         let cfg = parse(
             SHIPPED[0].1,
