@@ -174,7 +174,7 @@ enum Command {
 }
 
 /// How much `bench models` / `bench ablation` measure per row (unset: the defaults of
-/// `chicktrain::bench::models::Effort`, or of `--quick`).
+/// `chicktrain::bench::measure::Effort`, or of `--quick`).
 #[derive(Args, Clone, Copy)]
 struct EffortArgs {
     /// Untimed batch-1 runs before the timed ones [default: 3].
@@ -208,7 +208,8 @@ enum BenchWhat {
     /// images/s, peak memory (a fresh process per row), and test AP of --checkpoints.
     Models {
         /// Comma-separated variants: yolo-n, yolo-s, suffixes -p45 -nopsa -w<f> -m<k>;
-        /// mrcnn-r18/r34/r50/r101 (default: all scene options and depths).
+        /// mrcnn-r18/r34/r50/r101, suffix -paper for the detectron2-sized preset
+        /// (default: all scene options and compact depths).
         #[arg(long)]
         variants: Option<String>,
         /// Comma-separated input sizes (default 256,320,416,512,640).

@@ -57,7 +57,7 @@ fn bench_models_quick_writes_table_and_plot() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), 2, "{csv}");
     let header: Vec<&str> = lines[0].split(',').collect();
-    assert_eq!(header, chicktrain::bench::models::COLUMNS);
+    assert_eq!(header, chicktrain::bench::report::COLUMNS);
     let row: Vec<&str> = lines[1].split(',').collect();
     assert_eq!(row.len(), header.len());
     assert_eq!((row[0], row[1]), ("yolo-n-p45-w0.25-m4", "64"));

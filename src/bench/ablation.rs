@@ -8,17 +8,19 @@
 //! Trainings are deterministic, so their AP holds on a loaded machine; only the timings
 //! need a quiet one (`--no-train` re-times finished runs without training).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
-use crate::config::{self, DeviceKind};
+use crate::config::{self, Config, DeviceKind};
 use crate::train::checkpoint::Checkpoint;
 use crate::train::trainer::{model_config, train, TrainOptions};
 
-use super::models::{
-    finished_report, measure_in_child, run_accuracy, write_report, Effort, Row, Variant,
-};
+use super::accuracy::run_accuracy;
+use super::measure::Effort;
+use super::report::{finished_report, write_report, Row};
+use super::variant::Variant;
+use super::worker::measure_in_child;
 
 /// One ablation variant: a name (its run folder), what it changes, the `--set` overrides.
 pub struct AblationVariant {
@@ -110,7 +112,34 @@ pub fn ablation(o: &AblationOptions) -> Result<String> {
     if o.train_only && o.no_train {
         bail!("--train-only and --no-train exclude each other");
     }
-    for n in &o.only {
+    let chosen = chosen_variants(&o.only)?;
+    std::fs::create_dir_all(&o.out)
+        .with_context(|| format!("cannot create {}", o.out.display()))?;
+    crate::train::interrupt::install();
+    let mut rows = Vec::new();
+    let mut changes = Vec::new();
+    for v in &chosen {
+        if let Some((row, change)) = run_variant(o, v)? {
+            rows.push(row);
+            changes.push(change);
+        }
+    }
+    if o.train_only {
+        return Ok(format!(
+            "trained the ablation runs in {} (timings skipped: --train-only)",
+            o.out.display()
+        ));
+    }
+    let mut pre = preamble(o, &changes);
+    pre.push_str(&recommendation(&rows));
+    write_report(&o.out, &rows, &pre)?;
+    finished_report(&o.out)
+}
+
+/// The variants named in `only` (all when empty), in [`VARIANTS`] order; an unknown
+/// name is an error listing the known ones.
+fn chosen_variants(only: &[String]) -> Result<Vec<&'static AblationVariant>> {
+    for n in only {
         if !VARIANTS.iter().any(|v| v.name == n) {
             let names: Vec<&str> = VARIANTS.iter().map(|v| v.name).collect();
             bail!(
@@ -119,73 +148,82 @@ pub fn ablation(o: &AblationOptions) -> Result<String> {
             );
         }
     }
-    let chosen: Vec<&AblationVariant> = VARIANTS
+    Ok(VARIANTS
         .iter()
-        .filter(|v| o.only.is_empty() || o.only.iter().any(|n| n == v.name))
-        .collect();
-    std::fs::create_dir_all(&o.out)
-        .with_context(|| format!("cannot create {}", o.out.display()))?;
-    crate::train::interrupt::install();
-    let say = |s: String| {
-        if !o.quiet {
-            eprintln!("{s}");
-        }
-    };
-    let mut rows = Vec::new();
-    let mut changes = Vec::new();
-    for v in &chosen {
-        let mut set = o.overrides.clone();
-        set.push(format!("data.synthetic={}", o.synthetic));
-        set.extend(v.overrides.iter().map(|s| s.to_string()));
-        let cfg = config::load(&o.config, &set)
-            .with_context(|| format!("ablation variant {}", v.name))?;
-        let dir = o.out.join(v.name);
-        if !dir.join("test.json").exists() && !o.no_train {
-            let last = dir.join("last.bpk");
-            let resume = last.exists()
-                && Checkpoint::load(&last).is_ok_and(|c| c.header.epoch < cfg.train.epochs);
-            say(format!("ablation: training {} → {}", v.name, dir.display()));
-            let opts = TrainOptions {
-                run_dir: Some(dir.clone()),
-                resume,
-                smoke: false,
-                device: Some(o.device),
-                quiet: o.quiet,
-            };
-            train(cfg.clone(), &opts)
-                .with_context(|| format!("ablation variant {} ({})", v.name, dir.display()))?;
-        }
-        if o.train_only {
-            continue;
-        }
-        let acc = if dir.join("test.json").exists() {
-            Some(run_accuracy(&dir)?)
-        } else {
-            None
-        };
-        let mc = model_config(&cfg, 1)?;
-        let variant = Variant::of_detector(&mc);
-        let size = mc.input_size();
-        say(format!(
-            "ablation: timing {} ({variant} at {size} px)",
-            v.name
-        ));
-        let m = measure_in_child(&o.exe, &variant, size, o.effort, o.device)?;
-        rows.push(Row {
-            label: v.name.to_string(),
-            m,
-            acc,
-        });
-        changes.push(format!("- `{}`: {} (`{variant}`)", v.name, v.change));
+        .filter(|v| only.is_empty() || only.iter().any(|n| n == v.name))
+        .collect())
+}
+
+fn say(o: &AblationOptions, s: String) {
+    if !o.quiet {
+        eprintln!("{s}");
+    }
+}
+
+/// One variant: trains its run unless finished (or `--no-train`), then — unless
+/// `--train-only` — times it and returns its report row and its line of the change list.
+fn run_variant(o: &AblationOptions, v: &AblationVariant) -> Result<Option<(Row, String)>> {
+    let mut set = o.overrides.clone();
+    set.push(format!("data.synthetic={}", o.synthetic));
+    set.extend(v.overrides.iter().map(|s| s.to_string()));
+    let cfg =
+        config::load(&o.config, &set).with_context(|| format!("ablation variant {}", v.name))?;
+    let dir = o.out.join(v.name);
+    if !dir.join("test.json").exists() && !o.no_train {
+        train_run(o, v, &cfg, &dir)?;
     }
     if o.train_only {
-        return Ok(format!(
-            "trained the ablation runs in {} (timings skipped: --train-only)",
-            o.out.display()
-        ));
+        return Ok(None);
     }
+    let acc = if dir.join("test.json").exists() {
+        Some(run_accuracy(&dir)?)
+    } else {
+        None
+    };
+    let mc = model_config(&cfg, 1)?;
+    let variant = Variant::of_detector(&mc);
+    let size = mc.input_size();
+    say(
+        o,
+        format!("ablation: timing {} ({variant} at {size} px)", v.name),
+    );
+    let m = measure_in_child(&o.exe, &variant, size, o.effort, o.device)?;
+    let row = Row {
+        label: v.name.to_string(),
+        m,
+        acc,
+    };
+    Ok(Some((
+        row,
+        format!("- `{}`: {} (`{variant}`)", v.name, v.change),
+    )))
+}
+
+/// Trains `v`'s run into `dir`, resuming its `last.bpk` when that stopped early.
+fn train_run(o: &AblationOptions, v: &AblationVariant, cfg: &Config, dir: &Path) -> Result<()> {
+    let last = dir.join("last.bpk");
+    let resume =
+        last.exists() && Checkpoint::load(&last).is_ok_and(|c| c.header.epoch < cfg.train.epochs);
+    say(
+        o,
+        format!("ablation: training {} → {}", v.name, dir.display()),
+    );
+    let opts = TrainOptions {
+        run_dir: Some(dir.to_path_buf()),
+        resume,
+        smoke: false,
+        device: Some(o.device),
+        quiet: o.quiet,
+    };
+    train(cfg.clone(), &opts)
+        .with_context(|| format!("ablation variant {} ({})", v.name, dir.display()))?;
+    Ok(())
+}
+
+/// The report's opening: the config, the protocol, and the change list.
+fn preamble(o: &AblationOptions, changes: &[String]) -> String {
     let e = o.effort;
-    let mut pre = format!(
+    format!(
         "# Scene ablation\n\nConfig `{}` + {} synthetic{}, one option changed per variant; \
          AP on each run's test split (`best.bpk`). Latency: batch 1, {} warm-up + {} runs \
          (median, p10, p90); training: batch {}, median of {} steps; fresh process per \
@@ -202,37 +240,43 @@ pub fn ablation(o: &AblationOptions) -> Result<String> {
         e.train_batch,
         e.train_steps,
         changes.join("\n")
+    )
+}
+
+/// The "**Recommended:**" paragraph ([`recommend`], compared with the base when that
+/// has AP), or nothing when no row has AP.
+fn recommendation(rows: &[Row]) -> String {
+    let Some(i) = recommend(rows, AP_TOLERANCE) else {
+        return String::new();
+    };
+    let r = &rows[i];
+    let a = r.acc.as_ref().expect("recommend only picks rows with AP");
+    let base = rows.iter().find(|r| r.label == "base");
+    let mut s = format!(
+        "\n\n**Recommended:** `{}` — the fastest variant within {AP_TOLERANCE} segm AP of the best: {:.1} ms median latency, {:.2} GFLOPs, segm AP {:.3}, bbox AP {:.3}",
+        r.label, r.m.latency_ms[0], r.m.gflops, a.segm[0], a.bbox[0]
     );
-    if let Some(i) = recommend(&rows, AP_TOLERANCE) {
-        let r = &rows[i];
-        let a = r.acc.as_ref().expect("recommend only picks rows with AP");
-        let base = rows.iter().find(|r| r.label == "base");
-        pre.push_str(&format!(
-            "\n\n**Recommended:** `{}` — the fastest variant within {AP_TOLERANCE} segm AP of the best: {:.1} ms median latency, {:.2} GFLOPs, segm AP {:.3}, bbox AP {:.3}",
-            r.label, r.m.latency_ms[0], r.m.gflops, a.segm[0], a.bbox[0]
-        ));
-        if let Some(b) = base.filter(|b| b.label != r.label) {
-            if let Some(ba) = &b.acc {
-                pre.push_str(&format!(
-                    " (base: {:.1} ms, {:.2} GFLOPs, segm AP {:.3}, bbox AP {:.3}; latency ×{:.2} and GFLOPs ×{:.2} of the base)",
-                    b.m.latency_ms[0],
-                    b.m.gflops,
-                    ba.segm[0],
-                    ba.bbox[0],
-                    r.m.latency_ms[0] / b.m.latency_ms[0],
-                    r.m.gflops / b.m.gflops
-                ));
-            }
+    if let Some(b) = base.filter(|b| b.label != r.label) {
+        if let Some(ba) = &b.acc {
+            s.push_str(&format!(
+                " (base: {:.1} ms, {:.2} GFLOPs, segm AP {:.3}, bbox AP {:.3}; latency ×{:.2} and GFLOPs ×{:.2} of the base)",
+                b.m.latency_ms[0],
+                b.m.gflops,
+                ba.segm[0],
+                ba.bbox[0],
+                r.m.latency_ms[0] / b.m.latency_ms[0],
+                r.m.gflops / b.m.gflops
+            ));
         }
-        pre.push('.');
     }
-    write_report(&o.out, &rows, &pre)?;
-    finished_report(&o.out)
+    s.push('.');
+    s
 }
 
 #[cfg(test)]
 mod tests {
-    use super::super::models::{Accuracy, Measurement};
+    use super::super::accuracy::Accuracy;
+    use super::super::measure::Measurement;
     use super::*;
 
     fn row(label: &str, ms: f64, ap: Option<f64>) -> Row {

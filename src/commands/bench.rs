@@ -7,7 +7,9 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use crate::bench::ablation::{ablation, AblationOptions};
-use crate::bench::models::{self as bm, Effort};
+use crate::bench::measure::Effort;
+use crate::bench::models as bm;
+use crate::bench::worker::worker;
 use crate::config::{self, DeviceKind};
 use crate::experiments::sweep::{self, SweepOptions};
 
@@ -138,7 +140,7 @@ pub fn model_worker(
     effort: EffortFlags,
     device: DeviceKind,
 ) -> Result<String> {
-    bm::worker(variant, size, effort.over(Effort::default()), device)
+    worker(variant, size, effort.over(Effort::default()), device)
 }
 
 /// `sweep` as given on the command line.

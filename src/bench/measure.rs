@@ -1,0 +1,303 @@
+//! Measuring one (variant, size) in this process: parameters, GFLOPs, batch-1 latency,
+//! training throughput and peak memory, as a [`Measurement`]. This is what a `bench
+//! model-worker` child runs ([`super::worker`] keeps every row in a fresh process, so the
+//! peak-memory reading here is that row's alone).
+//!
+//! - **latency**: batch-1 forward pass until the outputs are on the host, after warm-up
+//!   runs; YOLO with BatchNorm folded (as deployed), its box decoding and NMS excluded
+//!   (ultralytics' "inference" time); Mask R-CNN's `forward_infer`, which includes its
+//!   proposal, box and mask stages. Median, 10th and 90th percentile.
+//! - **training throughput**: images/s of full steps at batch 8 — forward, the real loss
+//!   (task-aligned assigner + losses for YOLO; RPN + RoI losses for Mask R-CNN),
+//!   backward, SGD step — on procedural scenes with 6 objects per image, median step.
+//! - **peak memory**: the process' resident-set high-water mark after inference and
+//!   after training (Linux `/proc/self/status`; `getrusage` elsewhere).
+
+use std::time::Instant;
+
+use anyhow::{bail, Result};
+use burn::module::Module;
+use burn::optim::momentum::MomentumConfig;
+use burn::optim::{GradientsParams, ModuleOptimizer, SgdConfig};
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::data::ellipses::ellipse_batch;
+use crate::data::targets::Targets;
+use crate::eval::report::percentile;
+use crate::model::summary::ModelSummary;
+use crate::model::yolo::loss::{yolo_loss, LossWeights};
+use crate::util::tensor::to_host;
+
+use super::variant::Variant;
+
+/// What one worker measured for one (variant, size).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Measurement {
+    pub variant: String,
+    pub size: usize,
+    pub params: usize,
+    pub gflops: f64,
+    /// Batch-1 latency, ms: median, 10th and 90th percentile over `repeats` runs.
+    pub latency_ms: [f64; 3],
+    pub repeats: usize,
+    /// Training images/s at `train_batch` (median over `train_steps` timed steps).
+    pub train_img_s: f64,
+    pub train_batch: usize,
+    pub train_steps: usize,
+    /// Resident-set high-water mark after inference, and after training, MiB.
+    pub infer_peak_mib: f64,
+    pub peak_mib: f64,
+}
+
+/// How much to measure per row.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Effort {
+    /// Untimed batch-1 runs first.
+    pub warmup: usize,
+    /// Timed batch-1 runs.
+    pub repeats: usize,
+    pub train_batch: usize,
+    /// Timed training steps (after one untimed step).
+    pub train_steps: usize,
+}
+
+impl Default for Effort {
+    fn default() -> Effort {
+        Effort {
+            warmup: 3,
+            repeats: 30,
+            train_batch: 8,
+            train_steps: 3,
+        }
+    }
+}
+
+/// The process' peak resident set so far, MiB.
+pub fn peak_rss_mib() -> f64 {
+    if let Ok(s) = std::fs::read_to_string("/proc/self/status") {
+        if let Some(kb) = s
+            .lines()
+            .find_map(|l| l.strip_prefix("VmHWM:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        {
+            return kb / 1024.0;
+        }
+    }
+    rusage_peak_mib()
+}
+
+#[cfg(unix)]
+fn rusage_peak_mib() -> f64 {
+    // SAFETY: getrusage writes into the zeroed struct we own.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) } != 0 {
+        return f64::NAN;
+    }
+    // kB on Linux, bytes on macOS.
+    let kb = if cfg!(target_os = "macos") {
+        u.ru_maxrss as f64 / 1024.0
+    } else {
+        u.ru_maxrss as f64
+    };
+    kb / 1024.0
+}
+
+#[cfg(not(unix))]
+fn rusage_peak_mib() -> f64 {
+    f64::NAN
+}
+
+fn median(v: &[f64]) -> f64 {
+    percentile(v, 50.0)
+}
+
+/// The inputs every variant is timed on: a batch-1 image (inference), a training batch
+/// with its targets, and the SGD optimizer of the training steps.
+struct Inputs {
+    x1: Tensor<4>,
+    xb: Tensor<4>,
+    targets: Targets,
+    optim: ModuleOptimizer,
+}
+
+/// What a variant's timing loop gives back: the model's size, the inference peak
+/// memory, and the per-run times (ms) of inference and of training steps.
+struct Timed {
+    summary: ModelSummary,
+    infer_peak: f64,
+    lat: Vec<f64>,
+    steps: Vec<f64>,
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Measures `variant` at `size` in this process (what a worker runs).
+pub fn measure(variant: &Variant, size: usize, e: Effort, device: &Device) -> Result<Measurement> {
+    if size < 32 || size % 32 != 0 {
+        bail!("input size {size} must be a multiple of 32, at least 32");
+    }
+    if e.repeats == 0 || e.train_batch == 0 {
+        bail!("--repeats and the training batch must be at least 1");
+    }
+    device.seed(0);
+    let ad = device.clone().autodiff();
+    let (px1, _) = ellipse_batch(1, size, 6, 1);
+    let x1 = Tensor::<4>::from_data(TensorData::new(px1, [1, 3, size, size]), device);
+    let (pxb, targets) = ellipse_batch(e.train_batch, size, 6, 2);
+    let xb = Tensor::<4>::from_data(TensorData::new(pxb, [e.train_batch, 3, size, size]), &ad);
+    let optim = SgdConfig::new()
+        .with_momentum(Some(
+            MomentumConfig::new().with_momentum(0.9).with_dampening(0.0),
+        ))
+        .init();
+    let inputs = Inputs {
+        x1,
+        xb,
+        targets,
+        optim,
+    };
+    let t = match variant {
+        Variant::Yolo { .. } => time_yolo(variant, size, e, &ad, inputs)?,
+        Variant::MaskRcnn { .. } => time_maskrcnn(variant, size, e, &ad, inputs)?,
+    };
+    Ok(Measurement {
+        variant: variant.to_string(),
+        size,
+        params: t.summary.params,
+        gflops: t.summary.gflops,
+        latency_ms: [
+            median(&t.lat),
+            percentile(&t.lat, 10.0),
+            percentile(&t.lat, 90.0),
+        ],
+        repeats: e.repeats,
+        train_img_s: if t.steps.is_empty() {
+            f64::NAN
+        } else {
+            e.train_batch as f64 * 1e3 / median(&t.steps)
+        },
+        train_batch: e.train_batch,
+        train_steps: e.train_steps,
+        infer_peak_mib: t.infer_peak,
+        peak_mib: peak_rss_mib(),
+    })
+}
+
+/// A YOLO variant: fused (BatchNorm-folded) batch-1 inference, then training steps of
+/// the unfused model with the real loss.
+fn time_yolo(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Result<Timed> {
+    let Inputs {
+        x1,
+        xb,
+        targets,
+        mut optim,
+    } = i;
+    let cfg = v.yolo_config(size).expect("a YOLO variant");
+    let mut model = cfg.init(ad);
+    let summary = model.summary(size);
+    let fused = model.valid().fuse();
+    let mut lat = Vec::new();
+    for r in 0..e.warmup + e.repeats {
+        let t = Instant::now();
+        let out = fused.forward(x1.clone());
+        let _ = to_host(out.cls_logits);
+        let _ = to_host(out.proto);
+        if r >= e.warmup {
+            lat.push(ms(t));
+        }
+    }
+    drop(fused);
+    let infer_peak = peak_rss_mib();
+    let w = LossWeights::default();
+    let mut steps = Vec::new();
+    for r in 0..1 + e.train_steps {
+        let t = Instant::now();
+        let out = model.forward(xb.clone());
+        let loss = yolo_loss(&out, &targets, &w);
+        let grads = GradientsParams::from_grads(loss.total.backward(), &model);
+        model = optim.step(0.01, model, grads);
+        let _ = to_host(model.head.boxes[0].out.weight.val().sum());
+        if r >= 1 {
+            steps.push(ms(t));
+        }
+    }
+    Ok(Timed {
+        summary,
+        infer_peak,
+        lat,
+        steps,
+    })
+}
+
+/// A Mask R-CNN variant: batch-1 `forward_infer` (proposals, boxes and masks), then
+/// training steps with the RPN + RoI losses.
+fn time_maskrcnn(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Result<Timed> {
+    let Inputs {
+        x1,
+        xb,
+        targets,
+        mut optim,
+    } = i;
+    let cfg = v.maskrcnn_config(size).expect("a Mask R-CNN variant");
+    let mut model = cfg.init(ad);
+    let summary = model.summary(size);
+    let eval = model.valid();
+    let mut lat = Vec::new();
+    for r in 0..e.warmup + e.repeats {
+        let t = Instant::now();
+        let dets = eval.forward_infer(x1.clone());
+        if dets.len() != 1 {
+            bail!("Mask R-CNN returned {} results for 1 image", dets.len());
+        }
+        if r >= e.warmup {
+            lat.push(ms(t));
+        }
+    }
+    drop(eval);
+    let infer_peak = peak_rss_mib();
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let mut steps = Vec::new();
+    for r in 0..1 + e.train_steps {
+        let t = Instant::now();
+        let losses = model.forward_train(xb.clone(), &targets.images, &mut rng);
+        let grads = GradientsParams::from_grads(losses.total.backward(), &model);
+        model = optim.step(0.01, model, grads);
+        let _ = to_host(model.box_head.cls_score.weight.val().sum());
+        if r >= 1 {
+            steps.push(ms(t));
+        }
+    }
+    Ok(Timed {
+        summary,
+        infer_peak,
+        lat,
+        steps,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tiny_yolo_measures_in_process() {
+        let v: Variant = "yolo-n-p45-w0.25-m4".parse().unwrap();
+        let e = Effort {
+            warmup: 0,
+            repeats: 2,
+            train_batch: 2,
+            train_steps: 1,
+        };
+        let m = measure(&v, 64, e, &Device::flex()).unwrap();
+        assert_eq!((m.variant.as_str(), m.size), ("yolo-n-p45-w0.25-m4", 64));
+        assert!(m.params > 0 && m.gflops > 0.0);
+        assert!(m.latency_ms[1] <= m.latency_ms[0] && m.latency_ms[0] <= m.latency_ms[2]);
+        assert!(m.train_img_s > 0.0 && m.peak_mib >= m.infer_peak_mib && m.infer_peak_mib > 0.0);
+        assert!(measure(&v, 70, e, &Device::flex()).is_err());
+    }
+}
