@@ -371,7 +371,10 @@ mod tests {
                 "{:#}",
                 parse(SHIPPED[0].1, "q.toml", &[format!("data.split={bad}")]).unwrap_err()
             );
-            assert!(e.contains("data.split") && e.contains("[0, 0]"), "{bad}: {e}");
+            assert!(
+                e.contains("data.split") && e.contains("[0, 0]"),
+                "{bad}: {e}"
+            );
         }
     }
 
