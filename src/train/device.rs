@@ -55,19 +55,16 @@ fn wgpu() -> Result<Device> {
 /// Builds the device and runs `1 + 1` on it with the panic hook silenced: backends panic
 /// when no adapter or driver is found, which becomes an error naming `needs`.
 #[cfg(any(feature = "cuda", feature = "wgpu"))]
-fn probe(
-    make: impl Fn() -> Device + std::panic::UnwindSafe,
-    name: &str,
-    needs: &str,
-) -> Result<Device> {
+fn probe(make: impl FnOnce() -> Device, name: &str, needs: &str) -> Result<Device> {
     let hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(|_| {}));
-    let r = std::panic::catch_unwind(|| {
+    // The probe's state is dropped on a panic, never observed half-updated.
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         let d = make();
         let one = burn::tensor::Tensor::<1>::ones([1], &d);
         let v = crate::util::tensor::to_host(one.clone() + one);
         (d, v)
-    });
+    }));
     std::panic::set_hook(hook);
     match r {
         Ok((d, v)) if v == [2.0] => Ok(d),
