@@ -18,4 +18,5 @@ pub mod plot;
 pub mod run_files;
 pub mod schedule;
 pub mod smoke;
+pub mod state;
 pub mod trainer;

@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use burn::module::Module;
-use burn::optim::{GradientsParams, ModuleOptimizer};
+use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::annotations::split::Split;
@@ -22,16 +22,16 @@ use crate::config::{Config, DeviceKind};
 use crate::data::augment::AugmentConfig;
 use crate::data::dataset::{RealSet, SyntheticSet};
 
-use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header, Stats, FORMAT};
-use super::detector::{Detector, DetectorConfig};
+use super::checkpoint::{module_bytes, Checkpoint, Header, Stats, FORMAT};
+use super::detector::DetectorConfig;
 use super::device::device_of;
 use super::divergence::{check_weights, At, DivergenceGuard};
-use super::ema::Ema;
 use super::evaluate::evaluate_ids;
 use super::loader::{epoch_plan, mix, Loader};
 use super::run_files::{self, EpochRecord, StatsRecord, TestRecord};
 use super::schedule::step_lr;
 use super::smoke::smoke_config;
+use super::state::TrainState;
 use super::{optim, plot};
 use crate::util::progress;
 
@@ -138,88 +138,6 @@ fn load_data(
     let synthetic = SyntheticSet::new(&cfg.data, cfg.seed);
     synthetic.prepare()?;
     Ok((real, split, synthetic))
-}
-
-/// Weights, EMA and optimiser of a run, and how far it got.
-struct TrainState {
-    model: Detector,
-    ema: Ema<Detector>,
-    optim: ModuleOptimizer,
-    /// Epochs completed.
-    epoch: usize,
-    best_fitness: f64,
-    best_epoch: usize,
-    records: Vec<EpochRecord>,
-}
-
-impl TrainState {
-    /// A new model of `mcfg` on the autodiff device `ad`, or the state of `resume`.
-    fn new(
-        cfg: &Config,
-        mcfg: &DetectorConfig,
-        resume: Option<&Checkpoint>,
-        run_dir: &Path,
-        ad: &Device,
-        base: &Device,
-    ) -> Result<TrainState> {
-        let optim = optim::build(&cfg.train);
-        let Some(ck) = resume else {
-            let model = mcfg.init(ad);
-            let ema = Ema::new(&model, 0);
-            return Ok(TrainState {
-                model,
-                ema,
-                optim,
-                epoch: 0,
-                best_fitness: f64::NEG_INFINITY,
-                best_epoch: 0,
-                records: Vec::new(),
-            });
-        };
-        let last = run_dir.join("last.bpk");
-        if let Some(why) = mcfg.mismatch(&ck.header.model) {
-            bail!("--resume: cannot continue from {}: {why}", last.display());
-        }
-        let in_last = || format!("--resume: in {}", last.display());
-        let model = ck.model("model", ad).with_context(in_last)?;
-        let ema = Ema {
-            model: ck.model("ema", base).with_context(in_last)?,
-            updates: ck.header.ema_updates,
-        };
-        let optim = ck.optimizer(optim).with_context(in_last)?;
-        let records = run_files::read_metrics(run_dir, ck.header.epoch)?;
-        Ok(TrainState {
-            model,
-            ema,
-            optim,
-            epoch: ck.header.epoch,
-            best_fitness: ck.header.best_fitness,
-            best_epoch: run_files::best_epoch(&records),
-            records,
-        })
-    }
-
-    /// The weights evaluated and shipped: the EMA copy, or the model with EMA off.
-    fn eval_model(&self, ema: bool) -> Detector {
-        if ema {
-            self.ema.model.clone()
-        } else {
-            self.model.valid()
-        }
-    }
-
-    /// `last.bpk`: the evaluated weights as `ema`, plus the raw weights and optimiser
-    /// state for `--resume`.
-    fn last_checkpoint(&self, header: Header, eval_bytes: Vec<u8>) -> Result<Checkpoint> {
-        Ok(Checkpoint {
-            header,
-            sections: vec![
-                ("ema".into(), eval_bytes),
-                ("model".into(), module_bytes(&self.model)?),
-                ("optim".into(), optim_bytes(&self.optim)?),
-            ],
-        })
-    }
 }
 
 /// What a run keeps fixed across epochs: the config, the data and the model config, and

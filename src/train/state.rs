@@ -1,0 +1,100 @@
+//! The state a training run carries from epoch to epoch — weights, EMA, optimiser, how
+//! far it got and its records — built fresh or restored from `last.bpk`, and the one place
+//! a `last.bpk` is assembled from it.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use burn::module::Module;
+use burn::optim::ModuleOptimizer;
+use burn::tensor::Device;
+
+use crate::config::Config;
+
+use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header};
+use super::detector::{Detector, DetectorConfig};
+use super::ema::Ema;
+use super::optim;
+use super::run_files::{self, EpochRecord};
+
+/// Weights, EMA and optimiser of a run, and how far it got.
+pub struct TrainState {
+    pub model: Detector,
+    pub ema: Ema<Detector>,
+    pub optim: ModuleOptimizer,
+    /// Epochs completed.
+    pub epoch: usize,
+    pub best_fitness: f64,
+    pub best_epoch: usize,
+    pub records: Vec<EpochRecord>,
+}
+
+impl TrainState {
+    /// A new model of `mcfg` on the autodiff device `ad`, or the state of `resume`.
+    pub fn new(
+        cfg: &Config,
+        mcfg: &DetectorConfig,
+        resume: Option<&Checkpoint>,
+        run_dir: &Path,
+        ad: &Device,
+        base: &Device,
+    ) -> Result<TrainState> {
+        let optim = optim::build(&cfg.train);
+        let Some(ck) = resume else {
+            let model = mcfg.init(ad);
+            let ema = Ema::new(&model, 0);
+            return Ok(TrainState {
+                model,
+                ema,
+                optim,
+                epoch: 0,
+                best_fitness: f64::NEG_INFINITY,
+                best_epoch: 0,
+                records: Vec::new(),
+            });
+        };
+        let last = run_dir.join("last.bpk");
+        if let Some(why) = mcfg.mismatch(&ck.header.model) {
+            bail!("--resume: cannot continue from {}: {why}", last.display());
+        }
+        let in_last = || format!("--resume: in {}", last.display());
+        let model = ck.model("model", ad).with_context(in_last)?;
+        let ema = Ema {
+            model: ck.model("ema", base).with_context(in_last)?,
+            updates: ck.header.ema_updates,
+        };
+        let optim = ck.optimizer(optim).with_context(in_last)?;
+        let records = run_files::read_metrics(run_dir, ck.header.epoch)?;
+        Ok(TrainState {
+            model,
+            ema,
+            optim,
+            epoch: ck.header.epoch,
+            best_fitness: ck.header.best_fitness,
+            best_epoch: run_files::best_epoch(&records),
+            records,
+        })
+    }
+
+    /// The weights evaluated and shipped: the EMA copy, or the model with EMA off.
+    pub fn eval_model(&self, ema: bool) -> Detector {
+        if ema {
+            self.ema.model.clone()
+        } else {
+            self.model.valid()
+        }
+    }
+
+    /// `last.bpk`: the evaluated weights as `ema`, plus the raw weights and optimiser
+    /// state for `--resume`.
+    pub fn last_checkpoint(&self, header: Header, eval_bytes: Vec<u8>) -> Result<Checkpoint> {
+        Ok(Checkpoint {
+            header,
+            sections: vec![
+                ("ema".into(), eval_bytes),
+                ("model".into(), module_bytes(&self.model)?),
+                ("optim".into(), optim_bytes(&self.optim)?),
+            ],
+        })
+    }
+}
