@@ -173,35 +173,105 @@ fn load_res<'a>(sizes: &HashMap<u64, (u32, u32)>, dets: &'a [Detection]) -> Resu
 pub fn evaluate(gt: &CocoDataset, dets: &[Detection], iou_type: IouType) -> Result<CocoEvalResult> {
     let iou_thrs = linspace(0.5, 0.95, 10);
     let rec_thrs = linspace(0.0, 1.0, 101);
-    let mut img_ids: Vec<u64> = gt.images.iter().map(|im| im.id).collect();
-    img_ids.sort_unstable();
-    img_ids.dedup();
-    let mut cat_ids: Vec<u64> = gt.categories.iter().map(|c| c.id).collect();
-    cat_ids.sort_unstable();
-    cat_ids.dedup();
-    let (ni, nk) = (img_ids.len(), cat_ids.len());
-    let img_index: HashMap<u64, usize> =
-        img_ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
-    let cat_index: HashMap<u64, usize> =
-        cat_ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
-    let sizes: HashMap<u64, (u32, u32)> = gt
-        .images
-        .iter()
-        .map(|im| (im.id, (im.height, im.width)))
-        .collect();
-
+    let index = EvalIndex::new(gt);
     let segm = iou_type == IouType::Segm;
-    let mut gts: Vec<Vec<Inst>> = (0..ni * nk).map(|_| Vec::new()).collect();
+    let gts = gather_gts(gt, &index, segm)?;
+    let mut dts = gather_dts(dets, &index, segm)?;
+    let max_det = *MAX_DETS.last().unwrap_or(&100);
+    let ious = compute_ious(&gts, &mut dts, max_det);
+    let evals = evaluate_imgs(&index, &gts, &dts, &ious, max_det, &iou_thrs);
+    let (ni, nk) = (index.img_ids.len(), index.cat_ids.len());
+    let (precision, recall) = accumulate(&evals, ni, nk, &iou_thrs, &rec_thrs);
+    let mut result = CocoEvalResult {
+        iou_type,
+        stats: [0.0; 12],
+        iou_thrs,
+        rec_thrs,
+        cat_ids: index.cat_ids,
+        precision,
+        recall,
+    };
+    result.stats = STAT_ROWS.map(|(ap, thr, area, md)| result.summarize(ap, thr, area, md));
+    Ok(result)
+}
+
+/// The `summarize()` rows behind the 12 stats: (AP or AR, IoU threshold, area, maxDets).
+const STAT_ROWS: [(bool, Option<f64>, &str, usize); 12] = [
+    (true, None, "all", 100),
+    (true, Some(0.5), "all", 100),
+    (true, Some(0.75), "all", 100),
+    (true, None, "small", 100),
+    (true, None, "medium", 100),
+    (true, None, "large", 100),
+    (false, None, "all", 1),
+    (false, None, "all", 10),
+    (false, None, "all", 100),
+    (false, None, "small", 100),
+    (false, None, "medium", 100),
+    (false, None, "large", 100),
+];
+
+/// pycocotools' `params.imgIds` / `params.catIds` (sorted, unique) and the lookups from
+/// ids to their positions, so every image × category cell has one flat index `i * nk + k`.
+struct EvalIndex {
+    img_ids: Vec<u64>,
+    cat_ids: Vec<u64>,
+    img_index: HashMap<u64, usize>,
+    cat_index: HashMap<u64, usize>,
+    /// `(height, width)` per image id, for decoding masks.
+    sizes: HashMap<u64, (u32, u32)>,
+}
+
+impl EvalIndex {
+    /// From the GT's images and categories (duplicate ids collapse, as in pycocotools).
+    fn new(gt: &CocoDataset) -> Self {
+        let mut img_ids: Vec<u64> = gt.images.iter().map(|im| im.id).collect();
+        img_ids.sort_unstable();
+        img_ids.dedup();
+        let mut cat_ids: Vec<u64> = gt.categories.iter().map(|c| c.id).collect();
+        cat_ids.sort_unstable();
+        cat_ids.dedup();
+        let img_index: HashMap<u64, usize> =
+            img_ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
+        let cat_index: HashMap<u64, usize> =
+            cat_ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
+        let sizes: HashMap<u64, (u32, u32)> = gt
+            .images
+            .iter()
+            .map(|im| (im.id, (im.height, im.width)))
+            .collect();
+        EvalIndex {
+            img_ids,
+            cat_ids,
+            img_index,
+            cat_index,
+            sizes,
+        }
+    }
+
+    /// Number of image × category cells.
+    fn cells(&self) -> usize {
+        self.img_ids.len() * self.cat_ids.len()
+    }
+}
+
+/// `_prepare` for the ground truth: every GT annotation in its image × category cell,
+/// in file order, with its mask decoded when IoU is on masks.
+fn gather_gts(gt: &CocoDataset, index: &EvalIndex, segm: bool) -> Result<Vec<Vec<Inst>>> {
+    let nk = index.cat_ids.len();
+    let mut gts: Vec<Vec<Inst>> = (0..index.cells()).map(|_| Vec::new()).collect();
     for a in &gt.annotations {
-        let (Some(&i), Some(&k)) = (img_index.get(&a.image_id), cat_index.get(&a.category_id))
-        else {
+        let (Some(&i), Some(&k)) = (
+            index.img_index.get(&a.image_id),
+            index.cat_index.get(&a.category_id),
+        ) else {
             bail!(
                 "GT annotation {} refers to an unknown image or category",
                 a.id
             );
         };
         let rle = if segm {
-            let (h, w) = sizes[&a.image_id];
+            let (h, w) = index.sizes[&a.image_id];
             Some(
                 a.segmentation
                     .to_rle(h, w)
@@ -221,31 +291,24 @@ pub fn evaluate(gt: &CocoDataset, dets: &[Detection], iou_type: IouType) -> Resu
             rle_box,
         });
     }
-    let mut dts: Vec<Vec<Inst>> = (0..ni * nk).map(|_| Vec::new()).collect();
-    for d in load_res(&sizes, dets)? {
-        let Some(&k) = cat_index.get(&d.det.category_id) else {
+    Ok(gts)
+}
+
+/// `loadRes` + `_prepare` for the detections: each one in its image × category cell, in
+/// file order; detections of categories the GT lacks are dropped, as pycocotools does.
+fn gather_dts(dets: &[Detection], index: &EvalIndex, segm: bool) -> Result<Vec<Vec<Inst>>> {
+    let nk = index.cat_ids.len();
+    let mut dts: Vec<Vec<Inst>> = (0..index.cells()).map(|_| Vec::new()).collect();
+    for mut d in load_res(&index.sizes, dets)? {
+        let Some(&k) = index.cat_index.get(&d.det.category_id) else {
             continue; // pycocotools only evaluates the GT's categories
         };
-        let i = img_index[&d.det.image_id];
-        let rle = match (segm, d.rle) {
-            (false, _) => None,
-            (true, Some(rle)) => Some(rle),
-            (true, None) => {
-                let (h, w) = sizes[&d.det.image_id];
-                let rle = match &d.det.segmentation {
-                    Some(seg) => seg.to_rle(h, w),
-                    None => {
-                        // loadRes gives box-only results the box as a polygon
-                        let b = d.bbox;
-                        let (x1, x2, y1, y2) = (b[0], b[0] + b[2], b[1], b[1] + b[3]);
-                        Segmentation::Polygons(vec![vec![x1, y1, x1, y2, x2, y2, x2, y1]])
-                            .to_rle(h, w)
-                    }
-                };
-                Some(rle.with_context(|| {
-                    format!("detection {} (image {})", d.id - 1, d.det.image_id)
-                })?)
-            }
+        let i = index.img_index[&d.det.image_id];
+        let rle = if segm {
+            let size = index.sizes[&d.det.image_id];
+            Some(detection_mask(&mut d, size)?)
+        } else {
+            None
         };
         let rle_box = rle.as_ref().map_or([0.0; 4], |r| r.bbox());
         dts[i * nk + k].push(Inst {
@@ -258,9 +321,31 @@ pub fn evaluate(gt: &CocoDataset, dets: &[Detection], iou_type: IouType) -> Resu
             rle_box,
         });
     }
-    let max_det = *MAX_DETS.last().unwrap_or(&100);
-    // computeIoU: detections sorted by score (stable), top maxDet, IoU [d][g].
-    let mut ious: Vec<Vec<f64>> = Vec::with_capacity(ni * nk);
+    Ok(dts)
+}
+
+/// A detection's mask for segm IoU: the one `loadRes` already decoded, else its
+/// segmentation, else (box-only results) its box as a polygon, as `loadRes` makes it.
+fn detection_mask(d: &mut DtAnn, (h, w): (u32, u32)) -> Result<Rle> {
+    if let Some(rle) = d.rle.take() {
+        return Ok(rle);
+    }
+    let rle = match &d.det.segmentation {
+        Some(seg) => seg.to_rle(h, w),
+        None => {
+            // loadRes gives box-only results the box as a polygon
+            let b = d.bbox;
+            let (x1, x2, y1, y2) = (b[0], b[0] + b[2], b[1], b[1] + b[3]);
+            Segmentation::Polygons(vec![vec![x1, y1, x1, y2, x2, y2, x2, y1]]).to_rle(h, w)
+        }
+    };
+    rle.with_context(|| format!("detection {} (image {})", d.id - 1, d.det.image_id))
+}
+
+/// `computeIoU` per cell: detections sorted by score (stable), cut to the top `max_det`,
+/// and the IoU of every kept detection with every GT, row-major `[d][g]`.
+fn compute_ious(gts: &[Vec<Inst>], dts: &mut [Vec<Inst>], max_det: usize) -> Vec<Vec<f64>> {
+    let mut ious: Vec<Vec<f64>> = Vec::with_capacity(gts.len());
     for (g, d) in gts.iter().zip(dts.iter_mut()) {
         d.sort_by(|a, b| desc_score(a.score, b.score));
         d.truncate(max_det);
@@ -275,10 +360,21 @@ pub fn evaluate(gt: &CocoDataset, dets: &[Detection], iou_type: IouType) -> Resu
         }
         ious.push(m);
     }
-    // evaluateImg for every category × area range × image (pycocotools' order).
-    let nt = iou_thrs.len();
-    let na = AREA_RANGES.len();
-    let mut evals: Vec<Option<ImgEval>> = Vec::with_capacity(nk * na * ni);
+    ious
+}
+
+/// `evaluateImg` for every category × area range × image, in pycocotools' order, so
+/// entry `(k * na + a) * ni + i` is what `accumulate` reads for that triple.
+fn evaluate_imgs(
+    index: &EvalIndex,
+    gts: &[Vec<Inst>],
+    dts: &[Vec<Inst>],
+    ious: &[Vec<f64>],
+    max_det: usize,
+    iou_thrs: &[f64],
+) -> Vec<Option<ImgEval>> {
+    let (ni, nk) = (index.img_ids.len(), index.cat_ids.len());
+    let mut evals: Vec<Option<ImgEval>> = Vec::with_capacity(nk * AREA_RANGES.len() * ni);
     for k in 0..nk {
         for rng in AREA_RANGES {
             for i in 0..ni {
@@ -289,104 +385,145 @@ pub fn evaluate(gt: &CocoDataset, dets: &[Detection], iou_type: IouType) -> Resu
                     &ious[cell],
                     rng,
                     max_det,
-                    &iou_thrs,
+                    iou_thrs,
                 ));
             }
         }
     }
-    // accumulate
-    let nr = rec_thrs.len();
-    let nm = MAX_DETS.len();
+    evals
+}
+
+/// `accumulate`: precision `[T][R][K][A][M]` and recall `[T][K][A][M]` (C order), −1
+/// where a category × area range × maxDets has no evaluated image or no unignored GT.
+fn accumulate(
+    evals: &[Option<ImgEval>],
+    ni: usize,
+    nk: usize,
+    iou_thrs: &[f64],
+    rec_thrs: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    let (nt, nr, na, nm) = (
+        iou_thrs.len(),
+        rec_thrs.len(),
+        AREA_RANGES.len(),
+        MAX_DETS.len(),
+    );
     let mut precision = vec![-1.0; nt * nr * nk * na * nm];
     let mut recall = vec![-1.0; nt * nk * na * nm];
-    let eps = f64::EPSILON; // np.spacing(1)
     for k in 0..nk {
         for a in 0..na {
             for (m, &md) in MAX_DETS.iter().enumerate() {
                 let es: Vec<&ImgEval> = (0..ni)
                     .filter_map(|i| evals[k * na * ni + a * ni + i].as_ref())
                     .collect();
-                if es.is_empty() {
+                let Some(ranked) = RankedDets::new(&es, md) else {
                     continue;
-                }
-                let mut scores = Vec::new();
-                let mut owner = Vec::new(); // (eval index, detection index)
-                for (e_i, e) in es.iter().enumerate() {
-                    for d in 0..e.scores.len().min(md) {
-                        scores.push(e.scores[d]);
-                        owner.push((e_i, d));
-                    }
-                }
-                let mut order: Vec<usize> = (0..scores.len()).collect();
-                order.sort_by(|&x, &y| desc_score(scores[x], scores[y]));
-                let npig = es
-                    .iter()
-                    .map(|e| e.gt_ignore.iter().filter(|&&g| !g).count())
-                    .sum::<usize>();
-                if npig == 0 {
-                    continue;
-                }
-                let nd = order.len();
-                let mut rc = vec![0.0; nd];
-                let mut pr = vec![0.0; nd];
+                };
                 for t in 0..nt {
-                    let (mut tp, mut fp) = (0.0f64, 0.0f64);
-                    for (j, &o) in order.iter().enumerate() {
-                        let (e_i, d) = owner[o];
-                        let e = es[e_i];
-                        if !e.dt_ignore[t][d] {
-                            if e.dt_matched[t][d] {
-                                tp += 1.0;
-                            } else {
-                                fp += 1.0;
-                            }
-                        }
-                        rc[j] = tp / npig as f64;
-                        pr[j] = tp / (fp + tp + eps);
-                    }
-                    recall[((t * nk + k) * na + a) * nm + m] =
-                        if nd > 0 { rc[nd - 1] } else { 0.0 };
-                    for j in (1..nd).rev() {
-                        if pr[j] > pr[j - 1] {
-                            pr[j - 1] = pr[j];
-                        }
-                    }
-                    let mut j = 0;
-                    for (r, &thr) in rec_thrs.iter().enumerate() {
-                        while j < nd && rc[j] < thr {
-                            j += 1;
-                        }
-                        let q = if j < nd { pr[j] } else { 0.0 };
+                    let (rc, pr) = ranked.pr_curve(t);
+                    recall[((t * nk + k) * na + a) * nm + m] = rc.last().copied().unwrap_or(0.0);
+                    for (r, q) in interpolate_precision(&rc, pr, rec_thrs).enumerate() {
                         precision[(((t * nr + r) * nk + k) * na + a) * nm + m] = q;
                     }
                 }
             }
         }
     }
-    let mut result = CocoEvalResult {
-        iou_type,
-        stats: [0.0; 12],
-        iou_thrs,
-        rec_thrs,
-        cat_ids,
-        precision,
-        recall,
-    };
-    result.stats = [
-        result.summarize(true, None, "all", 100),
-        result.summarize(true, Some(0.5), "all", 100),
-        result.summarize(true, Some(0.75), "all", 100),
-        result.summarize(true, None, "small", 100),
-        result.summarize(true, None, "medium", 100),
-        result.summarize(true, None, "large", 100),
-        result.summarize(false, None, "all", 1),
-        result.summarize(false, None, "all", 10),
-        result.summarize(false, None, "all", 100),
-        result.summarize(false, None, "small", 100),
-        result.summarize(false, None, "medium", 100),
-        result.summarize(false, None, "large", 100),
-    ];
-    Ok(result)
+    (precision, recall)
+}
+
+/// One category × area range × maxDets in `accumulate`: every image's top-`md`
+/// detections merged into one stable score ranking, with the count of unignored GTs.
+struct RankedDets<'a> {
+    es: &'a [&'a ImgEval],
+    /// `(eval index, detection index)` of each gathered detection.
+    owner: Vec<(usize, usize)>,
+    /// Positions into `owner`, high score first (stable).
+    order: Vec<usize>,
+    /// pycocotools' `npig`: GTs that are not ignored.
+    npig: usize,
+}
+
+impl<'a> RankedDets<'a> {
+    /// `None` where pycocotools `continue`s: no evaluated image, or no unignored GT.
+    fn new(es: &'a [&'a ImgEval], md: usize) -> Option<Self> {
+        if es.is_empty() {
+            return None;
+        }
+        let mut scores = Vec::new();
+        let mut owner = Vec::new();
+        for (e_i, e) in es.iter().enumerate() {
+            for d in 0..e.scores.len().min(md) {
+                scores.push(e.scores[d]);
+                owner.push((e_i, d));
+            }
+        }
+        let mut order: Vec<usize> = (0..scores.len()).collect();
+        order.sort_by(|&x, &y| desc_score(scores[x], scores[y]));
+        let npig = es
+            .iter()
+            .map(|e| e.gt_ignore.iter().filter(|&&g| !g).count())
+            .sum::<usize>();
+        if npig == 0 {
+            return None;
+        }
+        Some(RankedDets {
+            es,
+            owner,
+            order,
+            npig,
+        })
+    }
+
+    /// Recall and raw precision after each ranked detection at IoU threshold `t`
+    /// (cumulative TP/FP over the unignored detections, `np.spacing(1)` in the divisor).
+    fn pr_curve(&self, t: usize) -> (Vec<f64>, Vec<f64>) {
+        let eps = f64::EPSILON; // np.spacing(1)
+        let nd = self.order.len();
+        let mut rc = vec![0.0; nd];
+        let mut pr = vec![0.0; nd];
+        let (mut tp, mut fp) = (0.0f64, 0.0f64);
+        for (j, &o) in self.order.iter().enumerate() {
+            let (e_i, d) = self.owner[o];
+            let e = self.es[e_i];
+            if !e.dt_ignore[t][d] {
+                if e.dt_matched[t][d] {
+                    tp += 1.0;
+                } else {
+                    fp += 1.0;
+                }
+            }
+            rc[j] = tp / self.npig as f64;
+            pr[j] = tp / (fp + tp + eps);
+        }
+        (rc, pr)
+    }
+}
+
+/// The 101-point interpolated precision: `pr` made non-increasing from the right, then
+/// read at the first detection whose recall reaches each threshold (0 past the end).
+fn interpolate_precision<'a>(
+    rc: &'a [f64],
+    mut pr: Vec<f64>,
+    rec_thrs: &'a [f64],
+) -> impl Iterator<Item = f64> + 'a {
+    let nd = rc.len();
+    for j in (1..nd).rev() {
+        if pr[j] > pr[j - 1] {
+            pr[j - 1] = pr[j];
+        }
+    }
+    let mut j = 0;
+    rec_thrs.iter().map(move |&thr| {
+        while j < nd && rc[j] < thr {
+            j += 1;
+        }
+        if j < nd {
+            pr[j]
+        } else {
+            0.0
+        }
+    })
 }
 
 /// `np.argsort(-score, kind='mergesort')` as a comparator: high first, NaN last, stable.
@@ -540,21 +677,8 @@ impl CocoEvalResult {
     /// The 12 lines pycocotools' `summarize()` prints.
     pub fn summary(&self) -> String {
         let mut s = String::new();
-        let rows: [(bool, Option<f64>, &str, usize); 12] = [
-            (true, None, "all", 100),
-            (true, Some(0.5), "all", 100),
-            (true, Some(0.75), "all", 100),
-            (true, None, "small", 100),
-            (true, None, "medium", 100),
-            (true, None, "large", 100),
-            (false, None, "all", 1),
-            (false, None, "all", 10),
-            (false, None, "all", 100),
-            (false, None, "small", 100),
-            (false, None, "medium", 100),
-            (false, None, "large", 100),
-        ];
-        for (i, (ap, thr, area, md)) in rows.into_iter().enumerate() {
+
+        for (i, (ap, thr, area, md)) in STAT_ROWS.into_iter().enumerate() {
             let (title, kind) = if ap {
                 ("Average Precision", "(AP)")
             } else {

@@ -49,41 +49,69 @@ fn from_gltf(p: [f32; 3]) -> Vec3 {
     Vec3::new(p[2], p[0], p[1])
 }
 
-/// Serialises a mesh (skinned or rigid) to .glb bytes.
-pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
-    let nv = mesh.positions.len();
-    anyhow::ensure!(nv > 0 && mesh.indices.len() >= 3, "mesh is empty");
-    let mut bin: Vec<u8> = Vec::new();
-    let mut views = Vec::new();
-    let mut accessors = Vec::new();
-    // Appends a buffer view + accessor; returns the accessor index.
-    let mut push = |bin: &mut Vec<u8>,
-                    bytes: Vec<u8>,
-                    ctype: u32,
-                    count: usize,
-                    ty: &str,
-                    target: Option<u32>,
-                    minmax: Option<([f32; 3], [f32; 3])>| {
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        let mut view = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
+/// glTF `componentType` and `bufferView.target` codes used here.
+const FLOAT: u32 = 5126;
+const UNSIGNED_INT: u32 = 5125;
+const UNSIGNED_SHORT: u32 = 5123;
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+
+/// The binary chunk being filled and the JSON `bufferViews` / `accessors` that describe
+/// it: one view and one accessor per attribute, each view 4-byte aligned.
+#[derive(Default)]
+struct BinBuilder {
+    bin: Vec<u8>,
+    views: Vec<serde_json::Value>,
+    accessors: Vec<serde_json::Value>,
+}
+
+impl BinBuilder {
+    /// Appends a buffer view + accessor; returns the accessor index.
+    fn push(
+        &mut self,
+        bytes: Vec<u8>,
+        ctype: u32,
+        count: usize,
+        ty: &str,
+        target: Option<u32>,
+        minmax: Option<([f32; 3], [f32; 3])>,
+    ) -> usize {
+        self.pad();
+        let mut view =
+            json!({"buffer": 0, "byteOffset": self.bin.len(), "byteLength": bytes.len()});
         if let Some(t) = target {
             view["target"] = json!(t);
         }
-        bin.extend_from_slice(&bytes);
-        views.push(view);
-        let mut acc = json!({"bufferView": views.len() - 1, "componentType": ctype,
+        self.bin.extend_from_slice(&bytes);
+        self.views.push(view);
+        let mut acc = json!({"bufferView": self.views.len() - 1, "componentType": ctype,
                              "count": count, "type": ty});
         if let Some((lo, hi)) = minmax {
             acc["min"] = json!(lo);
             acc["max"] = json!(hi);
         }
-        accessors.push(acc);
-        accessors.len() - 1
-    };
-    let f32s = |v: &mut Vec<u8>, x: f32| v.extend_from_slice(&x.to_le_bytes());
-    let (lo, hi) = mesh.positions.iter().fold(
+        self.accessors.push(acc);
+        self.accessors.len() - 1
+    }
+
+    /// Zero-pads the binary chunk to a multiple of 4 bytes (glTF alignment).
+    fn pad(&mut self) {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+    }
+}
+
+/// Little-endian bytes of a run of f32s (glTF buffers are little-endian).
+fn f32_bytes(xs: impl Iterator<Item = f32>, capacity: usize) -> Vec<u8> {
+    let mut b = Vec::with_capacity(capacity);
+    xs.for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
+    b
+}
+
+/// Per-axis min and max of the positions in glTF axes: the POSITION accessor must carry them.
+fn gltf_bounds(positions: &[Vec3]) -> ([f32; 3], [f32; 3]) {
+    positions.iter().fold(
         ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]),
         |(mut lo, mut hi), &p| {
             let g = to_gltf(p);
@@ -93,85 +121,125 @@ pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
             }
             (lo, hi)
         },
-    );
-    let mut b = Vec::with_capacity(nv * 12);
-    mesh.positions
-        .iter()
-        .for_each(|&p| to_gltf(p).iter().for_each(|&x| f32s(&mut b, x)));
-    let pos = push(&mut bin, b, 5126, nv, "VEC3", Some(34962), Some((lo, hi)));
-    let mut b = Vec::with_capacity(nv * 12);
-    mesh.normals.iter().for_each(|&p| {
-        to_gltf(p.normalize_or(Vec3::Z))
+    )
+}
+
+/// Serialises a mesh (skinned or rigid) to .glb bytes.
+pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
+    let nv = mesh.positions.len();
+    anyhow::ensure!(nv > 0 && mesh.indices.len() >= 3, "mesh is empty");
+    let mut bb = BinBuilder::default();
+    let (lo, hi) = gltf_bounds(&mesh.positions);
+    let b = f32_bytes(mesh.positions.iter().flat_map(|&p| to_gltf(p)), nv * 12);
+    let pos = bb.push(b, FLOAT, nv, "VEC3", Some(ARRAY_BUFFER), Some((lo, hi)));
+    let b = f32_bytes(
+        mesh.normals
             .iter()
-            .for_each(|&x| f32s(&mut b, x))
-    });
-    let nor = push(&mut bin, b, 5126, nv, "VEC3", Some(34962), None);
+            .flat_map(|&p| to_gltf(p.normalize_or(Vec3::Z))),
+        nv * 12,
+    );
+    let nor = bb.push(b, FLOAT, nv, "VEC3", Some(ARRAY_BUFFER), None);
     let mut b = Vec::with_capacity(mesh.indices.len() * 4);
     mesh.indices
         .iter()
         .for_each(|&i| b.extend_from_slice(&i.to_le_bytes()));
-    let idx = push(
-        &mut bin,
+    let idx = bb.push(
         b,
-        5125,
+        UNSIGNED_INT,
         mesh.indices.len(),
         "SCALAR",
-        Some(34963),
+        Some(ELEMENT_ARRAY_BUFFER),
         None,
     );
     let mut attributes = json!({"POSITION": pos, "NORMAL": nor});
     let mut nodes = vec![json!({"name": "carcass", "mesh": 0})];
     let mut skins = Vec::new();
     if let Some(skin) = &mesh.skin {
-        let mut b = Vec::with_capacity(nv * 8);
-        skin.vertex_joints.iter().for_each(|j| {
-            j.iter()
-                .for_each(|&x| b.extend_from_slice(&x.to_le_bytes()))
-        });
-        let jo = push(&mut bin, b, 5123, nv, "VEC4", Some(34962), None);
-        let mut b = Vec::with_capacity(nv * 16);
-        skin.vertex_weights
+        skins.push(push_skin(&mut bb, skin, nv, &mut attributes, &mut nodes));
+    }
+    bb.pad();
+    let mut root = json!({
+        "asset": {"version": "2.0", "generator": "chicktrain procedural carcass"},
+        "scene": 0,
+        "scenes": [{"nodes": scene_nodes(mesh)}],
+        "nodes": nodes,
+        "meshes": [{"name": "carcass", "primitives": [{"attributes": attributes,
+                     "indices": idx, "mode": 4}]}],
+        "buffers": [{"byteLength": bb.bin.len()}],
+        "bufferViews": bb.views,
+        "accessors": bb.accessors,
+    });
+    if !skins.is_empty() {
+        root["skins"] = json!(skins);
+    }
+    pack_glb(&root, &bb.bin)
+}
+
+/// The skin's share of the file: JOINTS_0 / WEIGHTS_0 attributes (`nv` vertices), the
+/// inverse bind matrices (translate(-pivot)), one node per joint after the mesh node;
+/// returns the `skins[0]` JSON.
+fn push_skin(
+    bb: &mut BinBuilder,
+    skin: &Skin,
+    nv: usize,
+    attributes: &mut serde_json::Value,
+    nodes: &mut Vec<serde_json::Value>,
+) -> serde_json::Value {
+    let mut b = Vec::with_capacity(nv * 8);
+    skin.vertex_joints.iter().for_each(|j| {
+        j.iter()
+            .for_each(|&x| b.extend_from_slice(&x.to_le_bytes()))
+    });
+    let jo = bb.push(b, UNSIGNED_SHORT, nv, "VEC4", Some(ARRAY_BUFFER), None);
+    let b = f32_bytes(skin.vertex_weights.iter().flatten().copied(), nv * 16);
+    let we = bb.push(b, FLOAT, nv, "VEC4", Some(ARRAY_BUFFER), None);
+    attributes["JOINTS_0"] = json!(jo);
+    attributes["WEIGHTS_0"] = json!(we);
+    let b = f32_bytes(
+        skin.joints
             .iter()
-            .for_each(|w| w.iter().for_each(|&x| f32s(&mut b, x)));
-        let we = push(&mut bin, b, 5126, nv, "VEC4", Some(34962), None);
-        attributes["JOINTS_0"] = json!(jo);
-        attributes["WEIGHTS_0"] = json!(we);
-        let mut b = Vec::new();
-        for j in &skin.joints {
-            let ibm = Mat4::from_translation(-Vec3::from(to_gltf(j.pivot)));
-            ibm.to_cols_array().iter().for_each(|&x| f32s(&mut b, x));
-        }
-        let ibm = push(&mut bin, b, 5126, skin.joints.len(), "MAT4", None, None);
-        let base = nodes.len();
-        for (i, j) in skin.joints.iter().enumerate() {
-            let parent_pivot = j.parent.map(|p| skin.joints[p].pivot).unwrap_or(Vec3::ZERO);
-            let children: Vec<usize> = skin
-                .joints
-                .iter()
-                .enumerate()
-                .filter(|(_, c)| c.parent == Some(i))
-                .map(|(k, _)| base + k)
-                .collect();
-            let mut node = json!({"name": j.name,
-                                  "translation": to_gltf(j.pivot - parent_pivot)});
-            if !children.is_empty() {
-                node["children"] = json!(children);
-            }
-            nodes.push(node);
-        }
-        nodes[0]["skin"] = json!(0);
-        let joints: Vec<usize> = (0..skin.joints.len()).map(|k| base + k).collect();
-        let root = skin
+            .flat_map(|j| Mat4::from_translation(-Vec3::from(to_gltf(j.pivot))).to_cols_array()),
+        0,
+    );
+    let ibm = bb.push(b, FLOAT, skin.joints.len(), "MAT4", None, None);
+    let base = nodes.len();
+    nodes.extend(joint_nodes(skin, base));
+    nodes[0]["skin"] = json!(0);
+    let joints: Vec<usize> = (0..skin.joints.len()).map(|k| base + k).collect();
+    let root = skin
+        .joints
+        .iter()
+        .position(|j| j.parent.is_none())
+        .unwrap_or(0)
+        + base;
+    json!({"joints": joints, "inverseBindMatrices": ibm, "skeleton": root})
+}
+
+/// The joint hierarchy as glTF nodes (node `base + k` is joint `k`): name, translation
+/// relative to the parent joint's pivot, children.
+fn joint_nodes(skin: &Skin, base: usize) -> Vec<serde_json::Value> {
+    let mut nodes = Vec::with_capacity(skin.joints.len());
+    for (i, j) in skin.joints.iter().enumerate() {
+        let parent_pivot = j.parent.map(|p| skin.joints[p].pivot).unwrap_or(Vec3::ZERO);
+        let children: Vec<usize> = skin
             .joints
             .iter()
-            .position(|j| j.parent.is_none())
-            .unwrap_or(0)
-            + base;
-        skins.push(json!({"joints": joints, "inverseBindMatrices": ibm, "skeleton": root}));
+            .enumerate()
+            .filter(|(_, c)| c.parent == Some(i))
+            .map(|(k, _)| base + k)
+            .collect();
+        let mut node = json!({"name": j.name,
+                              "translation": to_gltf(j.pivot - parent_pivot)});
+        if !children.is_empty() {
+            node["children"] = json!(children);
+        }
+        nodes.push(node);
     }
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
-    }
+    nodes
+}
+
+/// The scene's root nodes: the mesh node, then every root joint.
+fn scene_nodes(mesh: &Mesh) -> Vec<usize> {
     let mut scene_nodes = vec![0usize];
     if let Some(skin) = &mesh.skin {
         for (k, j) in skin.joints.iter().enumerate() {
@@ -180,21 +248,13 @@ pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
             }
         }
     }
-    let mut root = json!({
-        "asset": {"version": "2.0", "generator": "chicktrain procedural carcass"},
-        "scene": 0,
-        "scenes": [{"nodes": scene_nodes}],
-        "nodes": nodes,
-        "meshes": [{"name": "carcass", "primitives": [{"attributes": attributes,
-                     "indices": idx, "mode": 4}]}],
-        "buffers": [{"byteLength": bin.len()}],
-        "bufferViews": views,
-        "accessors": accessors,
-    });
-    if !skins.is_empty() {
-        root["skins"] = json!(skins);
-    }
-    let mut text = serde_json::to_vec(&root)?;
+    scene_nodes
+}
+
+/// The GLB container: 12-byte header, the JSON chunk (space-padded to 4 bytes), then the
+/// binary chunk (already 4-byte aligned).
+fn pack_glb(root: &serde_json::Value, bin: &[u8]) -> anyhow::Result<Vec<u8>> {
+    let mut text = serde_json::to_vec(root)?;
     while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
@@ -208,7 +268,7 @@ pub fn to_glb(mesh: &Mesh) -> anyhow::Result<Vec<u8>> {
     out.extend_from_slice(&text);
     out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
     out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin);
+    out.extend_from_slice(bin);
     Ok(out)
 }
 
@@ -227,33 +287,9 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
     let (doc, buffers, _) =
         gltf::import_slice(bytes).map_err(|e| GlbError::Parse(name.clone(), e))?;
     let invalid = |msg: String| GlbError::Invalid(name.clone(), msg);
-    let scene = doc
-        .default_scene()
-        .or_else(|| doc.scenes().next())
-        .ok_or_else(|| invalid("no scene".into()))?;
-    // Walk the scene graph collecting (node, world transform) of mesh nodes.
-    let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
-    let mut mesh_nodes = Vec::new();
-    while let Some((node, parent)) = stack.pop() {
-        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
-        if node.mesh().is_some() {
-            mesh_nodes.push((node.clone(), world));
-        }
-        for c in node.children() {
-            stack.push((c, world));
-        }
-    }
-    mesh_nodes.sort_by_key(|(n, _)| n.index());
-    if mesh_nodes.is_empty() {
-        return Err(invalid("the default scene has no mesh".into()));
-    }
+    let mesh_nodes = scene_mesh_nodes(&doc).map_err(invalid)?;
     let skin_doc = mesh_nodes.iter().find_map(|(n, _)| n.skin());
-    let mut positions = Vec::new();
-    let mut normals = Vec::new();
-    let mut indices = Vec::new();
-    let mut vjoints = Vec::new();
-    let mut vweights = Vec::new();
-    let mut all_normals = true;
+    let mut baked = BakedMesh::new();
     for (node, world) in &mesh_nodes {
         let m = node.mesh().expect("filtered above");
         let mname = m.name().unwrap_or("").to_string();
@@ -269,70 +305,20 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
                 .read_positions()
                 .ok_or_else(|| GlbError::NoPositions(name.clone(), pi, mname.clone()))?
                 .collect();
-            let base = positions.len() as u32;
-            let n = pos.len();
-            positions.extend(
-                pos.iter()
-                    .map(|p| from_gltf(xf.transform_point3(Vec3::from(*p)).into())),
-            );
-            match reader.read_normals() {
-                Some(ns) => normals.extend(ns.map(|p| {
-                    from_gltf(
-                        xf.transform_vector3(Vec3::from(p))
-                            .normalize_or(Vec3::Y)
-                            .into(),
-                    )
-                })),
-                None => {
-                    all_normals = false;
-                    normals.extend(std::iter::repeat_n(Vec3::Z, n));
-                }
-            }
-            let idx: Vec<u32> = match reader.read_indices() {
-                Some(i) => i.into_u32().collect(),
-                None => (0..n as u32).collect(),
-            };
-            if !idx.len().is_multiple_of(3) {
-                return Err(invalid(format!(
-                    "primitive {pi} of mesh {mname:?} has {} indices, not a multiple of 3",
-                    idx.len()
-                )));
-            }
-            if let Some(bad) = idx.iter().find(|&&i| i as usize >= n) {
-                return Err(invalid(format!(
-                    "primitive {pi} of mesh {mname:?}: index {bad} out of range ({n} vertices)"
-                )));
-            }
-            indices.extend(idx.iter().map(|i| i + base));
-            if skinned {
-                let j: Vec<[u16; 4]> = reader
-                    .read_joints(0)
-                    .map(|j| j.into_u16().collect())
-                    .unwrap_or_else(|| vec![[0; 4]; n]);
-                let w: Vec<[f32; 4]> = reader
-                    .read_weights(0)
-                    .map(|w| w.into_f32().collect())
-                    .unwrap_or_else(|| vec![[1.0, 0.0, 0.0, 0.0]; n]);
-                if j.len() != n || w.len() != n {
-                    return Err(invalid(format!(
-                        "primitive {pi}: JOINTS_0/WEIGHTS_0 count differs from POSITION"
-                    )));
-                }
-                vjoints.extend(j);
-                vweights.extend(w.into_iter().map(|w| {
-                    let s: f32 = w.iter().sum();
-                    if s > 1e-6 {
-                        w.map(|x| x / s)
-                    } else {
-                        [1.0, 0.0, 0.0, 0.0]
-                    }
-                }));
-            } else if skin_doc.is_some() {
-                vjoints.extend(std::iter::repeat_n([0u16; 4], n));
-                vweights.extend(std::iter::repeat_n([1.0f32, 0.0, 0.0, 0.0], n));
-            }
+            let at = PrimitiveAt { pi, mname: &mname };
+            baked
+                .add_primitive(&reader, &pos, xf, skinned, skin_doc.is_some(), at)
+                .map_err(invalid)?;
         }
     }
+    let BakedMesh {
+        positions,
+        mut normals,
+        indices,
+        vjoints,
+        vweights,
+        all_normals,
+    } = baked;
     if indices.is_empty() {
         return Err(invalid("no triangles".into()));
     }
@@ -344,57 +330,7 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
     }
     let skin = match skin_doc {
         None => None,
-        Some(skin) => {
-            let reader = skin.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let joints: Vec<gltf::Node> = skin.joints().collect();
-            let ibms: Vec<Mat4> = match reader.read_inverse_bind_matrices() {
-                Some(m) => m.map(|m| Mat4::from_cols_array_2d(&m)).collect(),
-                None => vec![Mat4::IDENTITY; joints.len()],
-            };
-            if ibms.len() != joints.len() {
-                return Err(invalid(
-                    "skin: inverse bind matrix count differs from joint count".into(),
-                ));
-            }
-            let node_to_joint: std::collections::HashMap<usize, usize> = joints
-                .iter()
-                .enumerate()
-                .map(|(k, n)| (n.index(), k))
-                .collect();
-            let mut parent = vec![None; joints.len()];
-            for (k, n) in joints.iter().enumerate() {
-                for c in n.children() {
-                    if let Some(&ck) = node_to_joint.get(&c.index()) {
-                        parent[ck] = Some(k);
-                    }
-                }
-            }
-            let out: Vec<Joint> = joints
-                .iter()
-                .enumerate()
-                .map(|(k, n)| Joint {
-                    name: n.name().unwrap_or("").to_string(),
-                    parent: parent[k],
-                    pivot: from_gltf(ibms[k].inverse().w_axis.truncate().into()),
-                })
-                .collect();
-            if out.iter().any(|j| !j.pivot.is_finite()) {
-                return Err(invalid(
-                    "skin: an inverse bind matrix is singular or non-finite".into(),
-                ));
-            }
-            if let Some(bad) = vjoints.iter().flatten().find(|&&j| j as usize >= out.len()) {
-                return Err(invalid(format!(
-                    "skin: vertex joint index {bad} out of range ({} joints)",
-                    out.len()
-                )));
-            }
-            Some(Skin {
-                joints: out,
-                vertex_joints: vjoints,
-                vertex_weights: vweights,
-            })
-        }
+        Some(skin) => Some(read_skin(&skin, &buffers, vjoints, vweights).map_err(invalid)?),
     };
     let mesh = Mesh {
         positions,
@@ -410,6 +346,218 @@ pub fn from_slice(bytes: &[u8], name: &str) -> Result<Mesh, GlbError> {
         )));
     }
     Ok(mesh)
+}
+
+/// The mesh nodes of the default scene (else the first), with their world transforms,
+/// in node-index order so the baked vertex order does not depend on the graph walk.
+fn scene_mesh_nodes(doc: &gltf::Document) -> Result<Vec<(gltf::Node<'_>, Mat4)>, String> {
+    let scene = doc
+        .default_scene()
+        .or_else(|| doc.scenes().next())
+        .ok_or_else(|| "no scene".to_string())?;
+    let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    let mut mesh_nodes = Vec::new();
+    while let Some((node, parent)) = stack.pop() {
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        if node.mesh().is_some() {
+            mesh_nodes.push((node.clone(), world));
+        }
+        for c in node.children() {
+            stack.push((c, world));
+        }
+    }
+    mesh_nodes.sort_by_key(|(n, _)| n.index());
+    if mesh_nodes.is_empty() {
+        return Err("the default scene has no mesh".into());
+    }
+    Ok(mesh_nodes)
+}
+
+/// Where a primitive sits, for error messages: its index and its mesh's name.
+struct PrimitiveAt<'a> {
+    pi: usize,
+    mname: &'a str,
+}
+
+/// Every primitive baked so far into one vertex/index list in the carcass frame, with
+/// per-vertex joints and weights once the file has a skin.
+struct BakedMesh {
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    indices: Vec<u32>,
+    vjoints: Vec<[u16; 4]>,
+    vweights: Vec<[f32; 4]>,
+    /// Every primitive had normals; otherwise they are recomputed for the whole mesh.
+    all_normals: bool,
+}
+
+impl BakedMesh {
+    /// Nothing baked yet; `all_normals` holds until a primitive lacks NORMAL.
+    fn new() -> Self {
+        BakedMesh {
+            positions: Vec::new(),
+            normals: Vec::new(),
+            indices: Vec::new(),
+            vjoints: Vec::new(),
+            vweights: Vec::new(),
+            all_normals: true,
+        }
+    }
+
+    /// Appends one triangle primitive (`pos` already read) transformed by `xf`: normals,
+    /// indices offset past the vertices so far, and, where the file has a skin, joints
+    /// and normalised weights (rigid primitives get joint 0 at weight 1).
+    fn add_primitive<'a, 's, F>(
+        &mut self,
+        reader: &gltf::mesh::Reader<'a, 's, F>,
+        pos: &[[f32; 3]],
+        xf: Mat4,
+        skinned: bool,
+        has_skin: bool,
+        at: PrimitiveAt,
+    ) -> Result<(), String>
+    where
+        F: Clone + Fn(gltf::Buffer<'a>) -> Option<&'s [u8]>,
+    {
+        let PrimitiveAt { pi, mname } = at;
+        let base = self.positions.len() as u32;
+        let n = pos.len();
+        self.positions.extend(
+            pos.iter()
+                .map(|p| from_gltf(xf.transform_point3(Vec3::from(*p)).into())),
+        );
+        match reader.read_normals() {
+            Some(ns) => self.normals.extend(ns.map(|p| {
+                from_gltf(
+                    xf.transform_vector3(Vec3::from(p))
+                        .normalize_or(Vec3::Y)
+                        .into(),
+                )
+            })),
+            None => {
+                self.all_normals = false;
+                self.normals.extend(std::iter::repeat_n(Vec3::Z, n));
+            }
+        }
+        let idx: Vec<u32> = match reader.read_indices() {
+            Some(i) => i.into_u32().collect(),
+            None => (0..n as u32).collect(),
+        };
+        if !idx.len().is_multiple_of(3) {
+            return Err(format!(
+                "primitive {pi} of mesh {mname:?} has {} indices, not a multiple of 3",
+                idx.len()
+            ));
+        }
+        if let Some(bad) = idx.iter().find(|&&i| i as usize >= n) {
+            return Err(format!(
+                "primitive {pi} of mesh {mname:?}: index {bad} out of range ({n} vertices)"
+            ));
+        }
+        self.indices.extend(idx.iter().map(|i| i + base));
+        if skinned {
+            let (j, w) = read_joints_weights(reader, n, pi)?;
+            self.vjoints.extend(j);
+            self.vweights.extend(w);
+        } else if has_skin {
+            self.vjoints.extend(std::iter::repeat_n([0u16; 4], n));
+            self.vweights
+                .extend(std::iter::repeat_n([1.0f32, 0.0, 0.0, 0.0], n));
+        }
+        Ok(())
+    }
+}
+
+/// JOINTS_0 and WEIGHTS_0 of a skinned primitive of `n` vertices (joint 0 at weight 1
+/// where absent), weights normalised to sum 1 (all-zero weights become joint 0).
+fn read_joints_weights<'a, 's, F>(
+    reader: &gltf::mesh::Reader<'a, 's, F>,
+    n: usize,
+    pi: usize,
+) -> Result<(Vec<[u16; 4]>, Vec<[f32; 4]>), String>
+where
+    F: Clone + Fn(gltf::Buffer<'a>) -> Option<&'s [u8]>,
+{
+    let j: Vec<[u16; 4]> = reader
+        .read_joints(0)
+        .map(|j| j.into_u16().collect())
+        .unwrap_or_else(|| vec![[0; 4]; n]);
+    let w: Vec<[f32; 4]> = reader
+        .read_weights(0)
+        .map(|w| w.into_f32().collect())
+        .unwrap_or_else(|| vec![[1.0, 0.0, 0.0, 0.0]; n]);
+    if j.len() != n || w.len() != n {
+        return Err(format!(
+            "primitive {pi}: JOINTS_0/WEIGHTS_0 count differs from POSITION"
+        ));
+    }
+    let w = w
+        .into_iter()
+        .map(|w| {
+            let s: f32 = w.iter().sum();
+            if s > 1e-6 {
+                w.map(|x| x / s)
+            } else {
+                [1.0, 0.0, 0.0, 0.0]
+            }
+        })
+        .collect();
+    Ok((j, w))
+}
+
+/// The skin's joints: hierarchy from the joint nodes' children, pivot = translation of
+/// the inverse of each inverse bind matrix; checks the vertices' joint indices.
+fn read_skin(
+    skin: &gltf::Skin,
+    buffers: &[gltf::buffer::Data],
+    vjoints: Vec<[u16; 4]>,
+    vweights: Vec<[f32; 4]>,
+) -> Result<Skin, String> {
+    let reader = skin.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+    let joints: Vec<gltf::Node> = skin.joints().collect();
+    let ibms: Vec<Mat4> = match reader.read_inverse_bind_matrices() {
+        Some(m) => m.map(|m| Mat4::from_cols_array_2d(&m)).collect(),
+        None => vec![Mat4::IDENTITY; joints.len()],
+    };
+    if ibms.len() != joints.len() {
+        return Err("skin: inverse bind matrix count differs from joint count".into());
+    }
+    let node_to_joint: std::collections::HashMap<usize, usize> = joints
+        .iter()
+        .enumerate()
+        .map(|(k, n)| (n.index(), k))
+        .collect();
+    let mut parent = vec![None; joints.len()];
+    for (k, n) in joints.iter().enumerate() {
+        for c in n.children() {
+            if let Some(&ck) = node_to_joint.get(&c.index()) {
+                parent[ck] = Some(k);
+            }
+        }
+    }
+    let out: Vec<Joint> = joints
+        .iter()
+        .enumerate()
+        .map(|(k, n)| Joint {
+            name: n.name().unwrap_or("").to_string(),
+            parent: parent[k],
+            pivot: from_gltf(ibms[k].inverse().w_axis.truncate().into()),
+        })
+        .collect();
+    if out.iter().any(|j| !j.pivot.is_finite()) {
+        return Err("skin: an inverse bind matrix is singular or non-finite".into());
+    }
+    if let Some(bad) = vjoints.iter().flatten().find(|&&j| j as usize >= out.len()) {
+        return Err(format!(
+            "skin: vertex joint index {bad} out of range ({} joints)",
+            out.len()
+        ));
+    }
+    Ok(Skin {
+        joints: out,
+        vertex_joints: vjoints,
+        vertex_weights: vweights,
+    })
 }
 
 /// The committed procedural carcass, embedded so rendering works from any directory.

@@ -10,9 +10,9 @@
 //! * [`cache::load_or_render`]: one sample through the on-disk render cache.
 //!
 //! One concept per file: `carcass` (generator), `glb` (asset I/O), `mesh`, `skin` (poses),
-//! `pile` (heightfield drop), `camera`, `light`, `material`, `noise`, `trace` (BVH +
-//! shading), `sensor`, `labels`, `scene` (sampling), `preset` (options), `export`
-//! (COCO + preview), `cache`.
+//! `pile` (heightfield drop), `camera`, `light`, `material`, `noise`, `trace` (BVH rays +
+//! shading), `screen` (raster primary visibility, shadow filter, crevices), `sensor`,
+//! `labels`, `scene` (sampling), `preset` (options), `export` (COCO + preview), `cache`.
 
 pub mod cache;
 pub mod camera;
@@ -27,6 +27,7 @@ pub mod noise;
 pub mod pile;
 pub mod preset;
 pub mod scene;
+pub mod screen;
 pub mod sensor;
 pub mod skin;
 pub mod trace;

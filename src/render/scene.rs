@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
 
-use glam::{Vec2, Vec3};
+use glam::{Quat, Vec2, Vec3};
 use rand::Rng;
 use rayon::prelude::*;
 
@@ -98,151 +98,31 @@ fn uni<R: Rng>(rng: &mut R, r: [f32; 2]) -> f32 {
     }
 }
 
-/// Samples a scene. `rng` is the image's own stream.
+/// Samples a scene. `rng` is the image's own stream; the helpers below draw from it in
+/// this order: count and density, camera, pile layout, each carcass's plan, light and
+/// room, plate, sensor, JPEG quality, render seed. Changing that order changes every image.
 pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene {
     let n = rng.random_range(opts.carcasses[0]..=opts.carcasses[1].max(opts.carcasses[0])) as usize;
     let density = uni(rng, opts.density);
-
-    // Camera: top view, jittered height, tilt, roll and field of view.
-    let cam_h = uni(rng, opts.camera_height);
-    let fov = uni(rng, opts.fov_deg).to_radians();
-    let half_view =
-        cam_h * (fov * 0.5).tan() * opts.width.max(opts.height) as f32 / opts.height as f32;
-    let tilt = rng.random_range(0.0..=opts.tilt_max_deg.to_radians());
-    let tilt_dir = rng.random_range(0.0..std::f32::consts::TAU);
-    let roll = rng.random_range(0.0..std::f32::consts::TAU);
-    let eye = Vec3::new(0.0, 0.0, cam_h);
-    let camera = Camera::top_view(eye, tilt, tilt_dir, roll, fov, opts.width, opts.height);
-    // Where the camera actually looks on the plate (tilt moves it).
-    let look_at = camera
-        .plate_point(opts.width as f32 * 0.5, opts.height as f32 * 0.5)
-        .map_or(Vec2::ZERO, |p| p.truncate());
-
-    // Pile: centre near the view centre (off-centre piles get cut by the border), spread
-    // set by the density: isolated ~2.2x the carcasses' footprint, overlapped ~0.5x.
-    let centre = look_at
-        + Vec2::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
-            * half_view
-            * opts.pile_offset;
-    let footprint = 0.055 * n as f32;
-    let spread = 2.4 + (0.45 - 2.4) * density;
-    let radius = ((footprint * spread / std::f32::consts::PI).sqrt()).min(half_view * 1.1);
-    let k = (12.0 + (2.0 - 12.0) * density).round().max(1.0) as usize;
-    // The map only needs to cover where carcasses can land: the candidate disc plus a
-    // carcass length (keeps it small for wide views).
-    let mut hf = HeightField::around(centre, radius + 0.45, 0.004);
-
-    let mut geo = Geometry::default();
-    let mut skins = Vec::with_capacity(n);
-    let mut resting = Vec::with_capacity(n);
-    let wsum: f32 = opts.resting_weights.iter().sum::<f32>().max(1e-6);
-    // Draw every random choice first (fixed order), then skin in parallel: skinning is
-    // pure, so the scene does not depend on scheduling; drops stay sequential.
-    let mut plans = Vec::with_capacity(n);
-    for _ in 0..n {
-        let pose = Pose::sample(rng, &opts.pose);
-        let u = rng.random_range(0.0..wsum);
-        let mode = if u < opts.resting_weights[0] {
-            RestingMode::BreastUp
-        } else if u < opts.resting_weights[0] + opts.resting_weights[1] {
-            RestingMode::BreastDown
-        } else {
-            RestingMode::Side
-        };
-        let yaw = rng.random_range(0.0..std::f32::consts::TAU);
-        let q = pile::resting_rotation(rng, mode, yaw);
-        let cands = pile::candidates(rng, centre, radius, k);
-        skins.push(SkinMaterial::sample(rng, opts.skin_yellow));
-        plans.push((pose, mode, q, cands));
-    }
-    let posed: Vec<(Vec<Vec3>, Vec<Vec3>)> = plans
-        .par_iter()
-        .map(|(pose, _, q, _)| {
-            let (pos, nor) = pose_mesh(&asset.mesh, pose);
-            pile::orient(&pos, &nor, *q)
-        })
-        .collect();
-    for (inst, ((local, mut nor), (_, mode, _, cands))) in posed.into_iter().zip(plans).enumerate()
-    {
-        let placed = pile::drop_one(&mut hf, &local, &mut nor, &cands);
-        let base = geo.positions.len() as u32;
-        geo.positions.extend(placed);
-        geo.normals.extend(nor);
-        geo.rest.extend_from_slice(&asset.mesh.positions);
-        geo.redness.extend_from_slice(&asset.redness);
-        for t in asset.mesh.indices.chunks_exact(3) {
-            geo.triangles.push([t[0] + base, t[1] + base, t[2] + base]);
-            geo.tri_instance.push(inst as u16);
-        }
-        resting.push(mode);
-    }
-
-    // Key light: a soft box above, off to one side; its colour temperature; the room.
-    let lh = uni(rng, opts.light_height);
-    let size = uni(rng, opts.light_size);
-    let a = rng.random_range(0.0..std::f32::consts::TAU);
-    let off = Vec2::new(a.cos(), a.sin()) * uni(rng, opts.light_offset);
-    let lc = look_at + off;
-    let la = rng.random_range(0.0..std::f32::consts::TAU);
-    let aspect = rng.random_range(0.5..1.0);
-    let u = Vec3::new(la.cos(), la.sin(), 0.0) * size * 0.5;
-    let v = Vec3::new(-la.sin(), la.cos(), 0.0) * size * 0.5 * aspect;
-    let kelvin = uni(rng, opts.light_kelvin);
-    let light_rgb = kelvin_to_rgb(kelvin);
-    let area = 4.0 * u.length() * v.length();
-    let color = light_rgb / area;
-    let key_centre = Vec3::new(lc.x, lc.y, lh);
-    let irradiance = 1.0 / (lh * lh);
-    let amb_ratio = uni(rng, opts.ambient);
-    let room_rgb = kelvin_to_rgb(kelvin + rng.random_range(-800.0..800.0));
-    let env = Environment {
-        ambient: room_rgb * irradiance * amb_ratio / std::f32::consts::PI,
-        key_dir: key_centre.normalize_or(Vec3::Z),
-        glow: light_rgb * irradiance * rng.random_range(0.05..0.25),
-        seed: rng.random(),
-        structure: rng.random_range(0.2..0.8),
-    };
-    let light = AreaLight {
-        centre: key_centre,
-        u,
-        v,
-        color,
-    };
+    let view = View::sample(rng, opts);
+    let layout = PileLayout::sample(rng, opts, &view, n, density);
+    let (plans, skins) = plan_carcasses(rng, opts, &layout, n);
+    let (geo, resting) = build_pile(asset, &layout, plans);
+    let lighting = Lighting::sample(rng, opts, view.look_at);
     let background = Background::sample(
         rng,
         opts.p_belt,
         opts.p_stains,
         opts.steel_roughness,
-        half_view * 1.5,
+        view.half_view * 1.5,
     );
-
-    let wbj = opts.white_balance_jitter;
-    // The camera's white balance corrects most of the light's colour (auto WB or a preset
-    // close to the lamp), never all of it, and adds its own small error.
-    let correction = uni(rng, opts.white_balance_correction);
-    let wb_fix = Vec3::ONE / light_rgb.max(Vec3::splat(1e-3)) * light_rgb.y;
-    let wb_fix = Vec3::ONE.lerp(wb_fix, correction);
-    let sensor = Sensor {
-        exposure_ev: uni(rng, opts.exposure_ev),
-        target: 0.2,
-        wb: wb_fix
-            * Vec3::new(
-                1.0 + rng.random_range(-wbj..=wbj),
-                1.0,
-                1.0 + rng.random_range(-wbj..=wbj),
-            ),
-        vignette: uni(rng, opts.vignette),
-        blur: uni(rng, opts.blur_px),
-        shot: uni(rng, opts.shot_noise),
-        read: uni(rng, opts.shot_noise) * 0.2,
-        seed: rng.random(),
-    };
+    let sensor = sample_sensor(rng, opts, lighting.light_rgb);
     let q = opts.jpeg_quality;
     let jpeg_quality = rng.random_range(q[0].min(q[1])..=q[1].max(q[0]));
     let look = Look {
-        camera,
-        light,
-        env,
+        camera: view.camera,
+        light: lighting.light,
+        env: lighting.env,
         background,
         skins,
         shadow_samples: opts.shadow_samples,
@@ -258,5 +138,223 @@ pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene
         resting,
         density,
         jpeg_quality,
+    }
+}
+
+/// The camera and what it sees of the plate: the pile and the light are placed relative
+/// to where the camera actually looks, and the plate is sized by the half view.
+struct View {
+    camera: Camera,
+    /// Where the image centre meets the plate (tilt moves it off the origin).
+    look_at: Vec2,
+    /// Half the plate width seen along the image's longer side, at the camera's height.
+    half_view: f32,
+}
+
+impl View {
+    /// Top view with jittered height, field of view, tilt (and its direction) and roll.
+    fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions) -> View {
+        let cam_h = uni(rng, opts.camera_height);
+        let fov = uni(rng, opts.fov_deg).to_radians();
+        let half_view =
+            cam_h * (fov * 0.5).tan() * opts.width.max(opts.height) as f32 / opts.height as f32;
+        let tilt = rng.random_range(0.0..=opts.tilt_max_deg.to_radians());
+        let tilt_dir = rng.random_range(0.0..std::f32::consts::TAU);
+        let roll = rng.random_range(0.0..std::f32::consts::TAU);
+        let eye = Vec3::new(0.0, 0.0, cam_h);
+        let camera = Camera::top_view(eye, tilt, tilt_dir, roll, fov, opts.width, opts.height);
+        let look_at = camera
+            .plate_point(opts.width as f32 * 0.5, opts.height as f32 * 0.5)
+            .map_or(Vec2::ZERO, |p| p.truncate());
+        View {
+            camera,
+            look_at,
+            half_view,
+        }
+    }
+}
+
+/// Where the pile goes and how tight it is: the disc drop positions are drawn from, and
+/// how many each carcass tries (it lands where it rests lowest, so more = more isolated).
+struct PileLayout {
+    centre: Vec2,
+    radius: f32,
+    /// Drop positions tried per carcass.
+    k: usize,
+}
+
+impl PileLayout {
+    /// Centre near the view centre (off-centre piles get cut by the border), spread set
+    /// by the density: isolated ~2.2x the carcasses' footprint, overlapped ~0.5x.
+    fn sample<R: Rng>(
+        rng: &mut R,
+        opts: &RenderOptions,
+        view: &View,
+        n: usize,
+        density: f32,
+    ) -> PileLayout {
+        let centre = view.look_at
+            + Vec2::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
+                * view.half_view
+                * opts.pile_offset;
+        let footprint = 0.055 * n as f32;
+        let spread = 2.4 + (0.45 - 2.4) * density;
+        let radius = ((footprint * spread / std::f32::consts::PI).sqrt()).min(view.half_view * 1.1);
+        let k = (12.0 + (2.0 - 12.0) * density).round().max(1.0) as usize;
+        PileLayout { centre, radius, k }
+    }
+}
+
+/// Every random choice for one carcass, drawn before any skinning.
+struct CarcassPlan {
+    pose: Pose,
+    mode: RestingMode,
+    rotation: Quat,
+    candidates: Vec<Vec2>,
+}
+
+/// Draws every carcass's pose, resting mode, rotation, drop candidates and skin, in a
+/// fixed order per carcass, so skinning can then run in parallel without touching `rng`.
+fn plan_carcasses<R: Rng>(
+    rng: &mut R,
+    opts: &RenderOptions,
+    layout: &PileLayout,
+    n: usize,
+) -> (Vec<CarcassPlan>, Vec<SkinMaterial>) {
+    let wsum: f32 = opts.resting_weights.iter().sum::<f32>().max(1e-6);
+    let mut skins = Vec::with_capacity(n);
+    let mut plans = Vec::with_capacity(n);
+    for _ in 0..n {
+        let pose = Pose::sample(rng, &opts.pose);
+        let u = rng.random_range(0.0..wsum);
+        let mode = if u < opts.resting_weights[0] {
+            RestingMode::BreastUp
+        } else if u < opts.resting_weights[0] + opts.resting_weights[1] {
+            RestingMode::BreastDown
+        } else {
+            RestingMode::Side
+        };
+        let yaw = rng.random_range(0.0..std::f32::consts::TAU);
+        let rotation = pile::resting_rotation(rng, mode, yaw);
+        let candidates = pile::candidates(rng, layout.centre, layout.radius, layout.k);
+        skins.push(SkinMaterial::sample(rng, opts.skin_yellow));
+        plans.push(CarcassPlan {
+            pose,
+            mode,
+            rotation,
+            candidates,
+        });
+    }
+    (plans, skins)
+}
+
+/// Skins and orients every carcass in parallel (pure, so the result does not depend on
+/// scheduling), then drops them one by one onto the height field, in plan order.
+fn build_pile(
+    asset: &Asset,
+    layout: &PileLayout,
+    plans: Vec<CarcassPlan>,
+) -> (Geometry, Vec<RestingMode>) {
+    // The map only needs to cover where carcasses can land: the candidate disc plus a
+    // carcass length (keeps it small for wide views).
+    let mut hf = HeightField::around(layout.centre, layout.radius + 0.45, 0.004);
+    let mut geo = Geometry::default();
+    let mut resting = Vec::with_capacity(plans.len());
+    let posed: Vec<(Vec<Vec3>, Vec<Vec3>)> = plans
+        .par_iter()
+        .map(|plan| {
+            let (pos, nor) = pose_mesh(&asset.mesh, &plan.pose);
+            pile::orient(&pos, &nor, plan.rotation)
+        })
+        .collect();
+    for (inst, ((local, mut nor), plan)) in posed.into_iter().zip(plans).enumerate() {
+        let placed = pile::drop_one(&mut hf, &local, &mut nor, &plan.candidates);
+        let base = geo.positions.len() as u32;
+        geo.positions.extend(placed);
+        geo.normals.extend(nor);
+        geo.rest.extend_from_slice(&asset.mesh.positions);
+        geo.redness.extend_from_slice(&asset.redness);
+        for t in asset.mesh.indices.chunks_exact(3) {
+            geo.triangles.push([t[0] + base, t[1] + base, t[2] + base]);
+            geo.tri_instance.push(inst as u16);
+        }
+        resting.push(plan.mode);
+    }
+    (geo, resting)
+}
+
+/// The key light, the room it sits in, and its colour (the sensor's white balance
+/// corrects towards it).
+struct Lighting {
+    light: AreaLight,
+    env: Environment,
+    light_rgb: Vec3,
+}
+
+impl Lighting {
+    /// Key light: a soft box above, off to one side of `look_at`; its colour
+    /// temperature; the room's ambient, glow and structure.
+    fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, look_at: Vec2) -> Lighting {
+        let lh = uni(rng, opts.light_height);
+        let size = uni(rng, opts.light_size);
+        let a = rng.random_range(0.0..std::f32::consts::TAU);
+        let off = Vec2::new(a.cos(), a.sin()) * uni(rng, opts.light_offset);
+        let lc = look_at + off;
+        let la = rng.random_range(0.0..std::f32::consts::TAU);
+        let aspect = rng.random_range(0.5..1.0);
+        let u = Vec3::new(la.cos(), la.sin(), 0.0) * size * 0.5;
+        let v = Vec3::new(-la.sin(), la.cos(), 0.0) * size * 0.5 * aspect;
+        let kelvin = uni(rng, opts.light_kelvin);
+        let light_rgb = kelvin_to_rgb(kelvin);
+        let area = 4.0 * u.length() * v.length();
+        let color = light_rgb / area;
+        let key_centre = Vec3::new(lc.x, lc.y, lh);
+        let irradiance = 1.0 / (lh * lh);
+        let amb_ratio = uni(rng, opts.ambient);
+        let room_rgb = kelvin_to_rgb(kelvin + rng.random_range(-800.0..800.0));
+        let env = Environment {
+            ambient: room_rgb * irradiance * amb_ratio / std::f32::consts::PI,
+            key_dir: key_centre.normalize_or(Vec3::Z),
+            glow: light_rgb * irradiance * rng.random_range(0.05..0.25),
+            seed: rng.random(),
+            structure: rng.random_range(0.2..0.8),
+        };
+        let light = AreaLight {
+            centre: key_centre,
+            u,
+            v,
+            color,
+        };
+        Lighting {
+            light,
+            env,
+            light_rgb,
+        }
+    }
+}
+
+/// The sensor: exposure, white balance (correcting most, never all, of the light's
+/// colour, plus its own small error), vignette, blur and noise.
+fn sample_sensor<R: Rng>(rng: &mut R, opts: &RenderOptions, light_rgb: Vec3) -> Sensor {
+    let wbj = opts.white_balance_jitter;
+    // The camera's white balance corrects most of the light's colour (auto WB or a preset
+    // close to the lamp), never all of it, and adds its own small error.
+    let correction = uni(rng, opts.white_balance_correction);
+    let wb_fix = Vec3::ONE / light_rgb.max(Vec3::splat(1e-3)) * light_rgb.y;
+    let wb_fix = Vec3::ONE.lerp(wb_fix, correction);
+    Sensor {
+        exposure_ev: uni(rng, opts.exposure_ev),
+        target: 0.2,
+        wb: wb_fix
+            * Vec3::new(
+                1.0 + rng.random_range(-wbj..=wbj),
+                1.0,
+                1.0 + rng.random_range(-wbj..=wbj),
+            ),
+        vignette: uni(rng, opts.vignette),
+        blur: uni(rng, opts.blur_px),
+        shot: uni(rng, opts.shot_noise),
+        read: uni(rng, opts.shot_noise) * 0.2,
+        seed: rng.random(),
     }
 }

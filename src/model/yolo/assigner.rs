@@ -147,8 +147,33 @@ pub fn assign_image(
         .iter()
         .map(|b| b.iter().sum::<f32>() > 0.0)
         .collect();
+    let in_gts = candidates(cfg, anchors, gt_boxes, &valid);
+    let (overlaps, metric) = align_metric(
+        cfg,
+        pd_scores,
+        pd_boxes,
+        gt_boxes,
+        gt_labels,
+        num_classes,
+        &in_gts,
+    );
+    let mut mask_pos = select_topk(cfg, &metric, &in_gts, &valid, na);
+    resolve_multi_claims(&mut mask_pos, &overlaps, ng, na);
+    let mut out = ImageAssignment::empty(na, num_classes);
+    fill_targets(&mut out, &mask_pos, gt_boxes, ng);
+    fill_soft_scores(&mut out, cfg, &mask_pos, &metric, &overlaps, gt_labels, ng);
+    out
+}
 
-    // 1. candidates (with tiny GT sides widened to stride_val, ultralytics 8.4).
+/// Step 1, `[G · A]`: anchor centres strictly (by `eps`) inside each valid GT box, with
+/// GT sides shorter than `stride_val` widened to it about the centre (ultralytics 8.4).
+fn candidates(
+    cfg: &AssignerConfig,
+    anchors: &[[f32; 2]],
+    gt_boxes: &[[f32; 4]],
+    valid: &[bool],
+) -> Vec<bool> {
+    let (na, ng) = (anchors.len(), gt_boxes.len());
     let mut in_gts = vec![false; ng * na];
     for g in 0..ng {
         if !valid[g] {
@@ -171,8 +196,21 @@ pub fn assign_image(
                 && y2 - p[1] > cfg.eps;
         }
     }
+    in_gts
+}
 
-    // 2. align metric and overlaps.
+/// Step 2, `[G · A]` each: overlaps (CIoU clamped ≥ 0) and the align metric
+/// `s^α · CIoU^β` for candidates, 0 elsewhere.
+fn align_metric(
+    cfg: &AssignerConfig,
+    pd_scores: &[f32],
+    pd_boxes: &[[f32; 4]],
+    gt_boxes: &[[f32; 4]],
+    gt_labels: &[usize],
+    num_classes: usize,
+    in_gts: &[bool],
+) -> (Vec<f32>, Vec<f32>) {
+    let (na, ng) = (pd_boxes.len(), gt_boxes.len());
     let mut overlaps = vec![0f32; ng * na];
     let mut metric = vec![0f32; ng * na];
     for g in 0..ng {
@@ -185,8 +223,19 @@ pub fn assign_image(
             }
         }
     }
+    (overlaps, metric)
+}
 
-    // 3. top-k per GT, kept if candidate.
+/// Step 3, `mask_pos [G · A]`: the `topk` anchors by metric per valid GT (ties broken by
+/// lower anchor index), kept if they are candidates.
+fn select_topk(
+    cfg: &AssignerConfig,
+    metric: &[f32],
+    in_gts: &[bool],
+    valid: &[bool],
+    na: usize,
+) -> Vec<bool> {
+    let ng = valid.len();
     let k = cfg.topk.min(na);
     let mut mask_pos = vec![false; ng * na];
     let mut order: Vec<usize> = (0..na).collect();
@@ -203,8 +252,12 @@ pub fn assign_image(
             mask_pos[g * na + a] = in_gts[g * na + a];
         }
     }
+    mask_pos
+}
 
-    // 4. anchors claimed by several GTs keep the highest-overlap GT.
+/// Step 4: an anchor claimed by several GTs keeps only the highest-overlap GT (the
+/// first on ties).
+fn resolve_multi_claims(mask_pos: &mut [bool], overlaps: &[f32], ng: usize, na: usize) {
     for a in 0..na {
         let claims = (0..ng).filter(|&g| mask_pos[g * na + a]).count();
         if claims > 1 {
@@ -214,9 +267,12 @@ pub fn assign_image(
             }
         }
     }
+}
 
-    // Targets.
-    let mut out = ImageAssignment::empty(na, num_classes);
+/// Foreground flags, assigned GT and target box per anchor; negatives get GT 0's box
+/// (ultralytics' argmax over an all-zero column).
+fn fill_targets(out: &mut ImageAssignment, mask_pos: &[bool], gt_boxes: &[[f32; 4]], ng: usize) {
+    let na = out.fg.len();
     for a in 0..na {
         if let Some(g) = (0..ng).find(|&g| mask_pos[g * na + a]) {
             out.fg[a] = true;
@@ -227,8 +283,20 @@ pub fn assign_image(
             out.target_boxes[a] = gt_boxes[0];
         }
     }
+}
 
-    // 5. normalised soft scores.
+/// Step 5: each positive's soft score on its GT's class, the max over its GTs of
+/// `metric · maxIoU_g / (maxMetric_g + eps)` (maxima over each GT's positives).
+fn fill_soft_scores(
+    out: &mut ImageAssignment,
+    cfg: &AssignerConfig,
+    mask_pos: &[bool],
+    metric: &[f32],
+    overlaps: &[f32],
+    gt_labels: &[usize],
+    ng: usize,
+) {
+    let (na, num_classes) = (out.fg.len(), out.num_classes);
     let mut pos_metric = vec![0f32; ng];
     let mut pos_overlap = vec![0f32; ng];
     for g in 0..ng {
@@ -251,7 +319,6 @@ pub fn assign_image(
         }
         out.target_scores[a * num_classes + gt_labels[out.target_gt[a]]] = norm;
     }
-    out
 }
 
 /// Index of the first maximum (torch's `max(dim).indices` on CPU).

@@ -175,8 +175,47 @@ struct Positive {
 /// `targets.images.len()` must equal the batch size; class indices must be `< nc`.
 pub fn yolo_loss(out: &YoloOutput, targets: &Targets, weights: &LossWeights) -> LossTerms {
     let device = out.cls_logits.device();
-    let [b, nc, na] = out.cls_logits.dims();
+    let [b, _, na] = out.cls_logits.dims();
     let [_, nm, ph, pw] = out.proto.dims();
+    check_batch(out, targets);
+    let points = out.grid.points();
+    let strides = out.grid.strides();
+    let assignments = assign_batch(out, targets, &points, &strides);
+    let tss: f32 = assignments
+        .iter()
+        .flat_map(|a| a.target_scores.iter())
+        .sum::<f32>()
+        .max(1.0);
+    let cls = classification_loss(out, &assignments, tss);
+    let positives = collect_positives(&assignments, na);
+    let num_fg = positives.len();
+    let zero = || Tensor::<1>::zeros([1], &device);
+    let (bbox, dfl, seg) = if num_fg == 0 {
+        (zero(), zero(), zero())
+    } else {
+        let (bbox, dfl) = box_losses(out, &assignments, &positives, &points, &strides, tss);
+        let seg = mask_loss(out, targets, &assignments, &positives, [nm, ph, pw]);
+        (bbox, dfl, seg)
+    };
+    let bbox = bbox.mul_scalar(weights.bbox);
+    let cls = cls.reshape([1]).mul_scalar(weights.cls);
+    let dfl = dfl.mul_scalar(weights.dfl);
+    let seg = seg.mul_scalar(weights.seg);
+    let total = (bbox.clone() + cls.clone() + dfl.clone() + seg.clone()).mul_scalar(b as f64);
+    LossTerms {
+        bbox,
+        cls,
+        dfl,
+        seg,
+        total,
+        num_fg,
+    }
+}
+
+/// Panics with a message when the targets do not fit the batch: one target image per
+/// batch image, anchors matching the grid, as many boxes as classes and masks.
+fn check_batch(out: &YoloOutput, targets: &Targets) {
+    let [b, _, na] = out.cls_logits.dims();
     assert_eq!(
         targets.images.len(),
         b,
@@ -193,12 +232,19 @@ pub fn yolo_loss(out: &YoloOutput, targets: &Targets, weights: &LossWeights) -> 
             t.masks.len()
         );
     }
-    let points = out.grid.points();
-    let strides = out.grid.strides();
+}
+
+/// Runs the TAL assigner per image on host copies of the detached predictions:
+/// probabilities `[B, nc, A]` and DFL-decoded boxes (xyxy pixels).
+fn assign_batch(
+    out: &YoloOutput,
+    targets: &Targets,
+    points: &[[f32; 2]],
+    strides: &[f32],
+) -> Vec<ImageAssignment> {
+    let [b, nc, na] = out.cls_logits.dims();
     let level_strides: Vec<usize> = out.grid.levels.iter().map(|l| l.0).collect();
     let acfg = AssignerConfig::for_strides(&level_strides);
-
-    // Detached predictions to host: probabilities [B, nc, A] and decoded boxes [B, 4, A].
     let probs = to_host(burn::tensor::activation::sigmoid(
         out.cls_logits.clone().detach(),
     ));
@@ -211,10 +257,9 @@ pub fn yolo_loss(out: &YoloOutput, targets: &Targets, weights: &LossWeights) -> 
     let dist = to_host(dfl_expectation::<4, 3>(dist)); // [B, 4, A]
     let anchors_px: Vec<[f32; 2]> = points
         .iter()
-        .zip(&strides)
+        .zip(strides)
         .map(|(p, &s)| [p[0] * s, p[1] * s])
         .collect();
-
     let mut assignments = Vec::with_capacity(b);
     for (i, t) in targets.images.iter().enumerate() {
         let mut sc = vec![0f32; na * nc];
@@ -245,13 +290,14 @@ pub fn yolo_loss(out: &YoloOutput, targets: &Targets, weights: &LossWeights) -> 
             nc,
         ));
     }
-    let tss: f32 = assignments
-        .iter()
-        .flat_map(|a| a.target_scores.iter())
-        .sum::<f32>()
-        .max(1.0);
+    assignments
+}
 
-    // Classification: BCE over every anchor and class.
+/// Classification (un-gained): BCE over every anchor and class against the soft
+/// targets, summed and divided by the target-score sum `tss`.
+fn classification_loss(out: &YoloOutput, assignments: &[ImageAssignment], tss: f32) -> Tensor<1> {
+    let device = out.cls_logits.device();
+    let [b, nc, na] = out.cls_logits.dims();
     let mut tgt = vec![0f32; b * nc * na];
     for (i, asg) in assignments.iter().enumerate() {
         for a in 0..na {
@@ -261,11 +307,15 @@ pub fn yolo_loss(out: &YoloOutput, targets: &Targets, weights: &LossWeights) -> 
         }
     }
     let tgt = host(tgt, [b, nc, na], &device);
-    let cls = bce_with_logits(out.cls_logits.clone(), tgt)
+    bce_with_logits(out.cls_logits.clone(), tgt)
         .sum()
-        .div_scalar(tss);
+        .div_scalar(tss)
+}
 
-    let positives: Vec<Positive> = assignments
+/// The batch's positive anchors, image by image and anchor by anchor, with their GT
+/// and box-loss weight.
+fn collect_positives(assignments: &[ImageAssignment], na: usize) -> Vec<Positive> {
+    assignments
         .iter()
         .enumerate()
         .flat_map(|(i, asg)| {
@@ -276,29 +326,7 @@ pub fn yolo_loss(out: &YoloOutput, targets: &Targets, weights: &LossWeights) -> 
                 weight: asg.weight(a),
             })
         })
-        .collect();
-    let num_fg = positives.len();
-    let zero = || Tensor::<1>::zeros([1], &device);
-    let (bbox, dfl, seg) = if num_fg == 0 {
-        (zero(), zero(), zero())
-    } else {
-        let (bbox, dfl) = box_losses(out, &assignments, &positives, &points, &strides, tss);
-        let seg = mask_loss(out, targets, &assignments, &positives, [nm, ph, pw]);
-        (bbox, dfl, seg)
-    };
-    let bbox = bbox.mul_scalar(weights.bbox);
-    let cls = cls.reshape([1]).mul_scalar(weights.cls);
-    let dfl = dfl.mul_scalar(weights.dfl);
-    let seg = seg.mul_scalar(weights.seg);
-    let total = (bbox.clone() + cls.clone() + dfl.clone() + seg.clone()).mul_scalar(b as f64);
-    LossTerms {
-        bbox,
-        cls,
-        dfl,
-        seg,
-        total,
-        num_fg,
-    }
+        .collect()
 }
 
 /// CIoU and DFL losses over the positives (un-gained), each `[1]`.
