@@ -4,9 +4,9 @@
 //! shared scenario, `common::smoke`); the same steps on ndarray; a non-finite loss
 //! stopping with a clean error.
 
-use chicktrain::commands::train::SplitName;
+use chicktrain::commands::train::{eval_cmd, SplitName};
 use chicktrain::config::{self, DeviceKind};
-use chicktrain::train::run_files::read_test;
+use chicktrain::train::run_files::{read_test, StatsRecord};
 use chicktrain::train::trainer::{train, TrainOptions};
 
 mod common;
@@ -29,6 +29,22 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
         Some(own.to_str().unwrap()),
     );
     assert_eq!(ev.segm, read_test(&r.run).unwrap().segm);
+
+    // Checkpoints do not depend on the device: the flex-trained best.bpk scores the same
+    // on ndarray (on the CPU backends bit for bit; a GPU backend rounds differently).
+    let on_ndarray: StatsRecord = serde_json::from_str(
+        &eval_cmd(
+            &r.run.join("best.bpk"),
+            SplitName::Test,
+            None,
+            Some(DeviceKind::Ndarray),
+            true,
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let t = read_test(&r.run).unwrap();
+    assert_eq!((on_ndarray.bbox, on_ndarray.segm), (t.bbox, t.segm));
 
     // Resuming a finished run says so.
     let e = format!("{:#}", train(r.resumed, &r.resume).unwrap_err());
