@@ -426,9 +426,9 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             no_train,
             device,
             quiet,
-        }) => bench_cmd::sweep_cmd(bench_cmd::SweepRequest {
+        }) => bench_cmd::sweep(&bench_cmd::SweepOptions {
             config,
-            synthetic: syn,
+            synthetic: bench_cmd::parse_counts(&syn)?,
             seeds,
             overrides: set,
             smoke,

@@ -14,7 +14,8 @@ use anyhow::{bail, Context, Result};
 
 use crate::config::{self, Config, DeviceKind};
 use crate::train::checkpoint::Checkpoint;
-use crate::train::trainer::{model_config, train, TrainOptions};
+use crate::train::detector::DetectorConfig;
+use crate::train::trainer::{train, TrainOptions};
 
 use super::accuracy::run_accuracy;
 use super::measure::Effort;
@@ -180,7 +181,7 @@ fn run_variant(o: &AblationOptions, v: &AblationVariant) -> Result<Option<(Row, 
     } else {
         None
     };
-    let mc = model_config(&cfg, 1)?;
+    let mc = DetectorConfig::from_config(&cfg, 1)?;
     let variant = Variant::of_detector(&mc);
     let size = mc.input_size();
     say(

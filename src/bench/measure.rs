@@ -26,9 +26,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::ellipses::ellipse_batch;
 use crate::data::targets::Targets;
-use crate::eval::report::percentile;
 use crate::model::summary::ModelSummary;
 use crate::model::yolo::loss::{yolo_loss, LossWeights};
+use crate::util::stats::percentile;
 use crate::util::tensor::to_host;
 
 use super::variant::Variant;

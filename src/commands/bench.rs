@@ -11,7 +11,9 @@ use crate::bench::measure::Effort;
 use crate::bench::models as bm;
 use crate::bench::worker::worker;
 use crate::config::{self, DeviceKind};
-use crate::experiments::sweep::{self, SweepOptions};
+/// `chicktrain sweep` is the experiment itself: [`sweep`] over [`SweepOptions`], the
+/// counts parsed by [`parse_counts`].
+pub use crate::experiments::sweep::{parse_counts, sweep, SweepOptions};
 
 /// Per-row effort flags; unset ones keep the base (the defaults, or `--quick`'s).
 #[derive(Clone, Copy, Debug, Default)]
@@ -141,34 +143,4 @@ pub fn model_worker(
     device: DeviceKind,
 ) -> Result<String> {
     worker(variant, size, effort.over(Effort::default()), device)
-}
-
-/// `sweep` as given on the command line.
-#[derive(Clone, Debug)]
-pub struct SweepRequest {
-    pub config: String,
-    /// Comma-separated synthetic counts.
-    pub synthetic: String,
-    pub seeds: usize,
-    pub overrides: Vec<String>,
-    pub smoke: bool,
-    pub out: Option<PathBuf>,
-    pub no_train: bool,
-    pub device: Option<DeviceKind>,
-    pub quiet: bool,
-}
-
-/// `chicktrain sweep`.
-pub fn sweep_cmd(r: SweepRequest) -> Result<String> {
-    sweep::sweep(&SweepOptions {
-        config: r.config,
-        synthetic: sweep::parse_counts(&r.synthetic)?,
-        seeds: r.seeds,
-        overrides: r.overrides,
-        smoke: r.smoke,
-        out: r.out,
-        no_train: r.no_train,
-        device: r.device,
-        quiet: r.quiet,
-    })
 }

@@ -72,8 +72,6 @@ impl Table {
     }
 }
 
-pub use crate::util::stats::{mean_std, percentile};
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -21,11 +21,12 @@ use anyhow::{bail, Context, Result};
 
 use crate::config::{self, DeviceKind};
 use crate::eval::plots::{write_png, Panel, Series, PALETTE};
-use crate::eval::report::{mean_std, Table};
+use crate::eval::report::Table;
 use crate::train::checkpoint::Checkpoint;
 use crate::train::run_files;
 use crate::train::smoke::smoke_config;
 use crate::train::trainer::{train, TrainOptions};
+use crate::util::stats::mean_std;
 
 /// What to sweep.
 #[derive(Clone, Debug)]

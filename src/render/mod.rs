@@ -42,6 +42,9 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde_json::json;
 
+use crate::util::hash::mix64;
+use crate::util::png::encode_png;
+
 pub use labels::{InstanceLabel, LabelThresholds};
 pub use preset::{ImageFormat, RenderOptions};
 
@@ -108,10 +111,10 @@ impl RenderedSample {
 pub fn image_rng(opts: &RenderOptions, seed: u64, index: u64) -> ChaCha8Rng {
     let mut key = [0u8; 32];
     let words = [
-        noise::mix64(opts.domain()),
-        noise::mix64(seed ^ 0xC41C_4E17),
-        noise::mix64(index.wrapping_add(0x5EED)),
-        noise::mix64(opts.domain() ^ seed.rotate_left(17) ^ index.rotate_left(41)),
+        mix64(opts.domain()),
+        mix64(seed ^ 0xC41C_4E17),
+        mix64(index.wrapping_add(0x5EED)),
+        mix64(opts.domain() ^ seed.rotate_left(17) ^ index.rotate_left(41)),
     ];
     for (i, w) in words.iter().enumerate() {
         key[i * 8..i * 8 + 8].copy_from_slice(&w.to_le_bytes());
@@ -178,7 +181,7 @@ pub fn encode_sample(
 ) -> anyhow::Result<(Vec<u8>, &'static str)> {
     Ok(match opts.format {
         ImageFormat::Jpg => (sensor::encode_jpeg(&s.image, s.jpeg_quality)?, "jpg"),
-        ImageFormat::Png => (sensor::encode_png(&s.image)?, "png"),
+        ImageFormat::Png => (encode_png(&s.image)?, "png"),
     })
 }
 
@@ -272,7 +275,7 @@ pub fn render_dataset(opts: &RenderOptions, out_dir: &Path, progress: bool) -> a
     ds.save(&out_dir.join("annotations.json"))?;
     if !tiles.is_empty() {
         let sheet = export::contact_sheet(&tiles, 4);
-        let png = sensor::encode_png(&sheet)?;
+        let png = encode_png(&sheet)?;
         std::fs::write(out_dir.join("preview.png"), png).context("cannot write preview.png")?;
     }
     let meta = json!({

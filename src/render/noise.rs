@@ -1,10 +1,8 @@
-//! Deterministic hashing and procedural noise (value noise, fBm, cellular) used by the
+//! Procedural noise (value noise, fBm, cellular) over the stable hashes of `util::hash`, used by the
 //! materials, the plate and the sensor. Pure functions of their inputs and a seed, so a
 //! pixel's value never depends on which thread shades it (pbrt's hashed sampler idea).
 
 use glam::{IVec3, Vec3};
-
-pub use crate::util::hash::{hash, mix64};
 
 /// Uniform [0, 1) from a hash.
 #[inline]

@@ -8,8 +8,7 @@ use image::RgbImage;
 
 use rayon::prelude::*;
 
-use super::noise::hash;
-pub use crate::util::png::encode_png;
+use crate::util::hash::hash;
 
 #[inline]
 pub fn srgb_to_linear(c: f32) -> f32 {
@@ -164,6 +163,7 @@ pub fn encode_jpeg(img: &RgbImage, quality: u8) -> anyhow::Result<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::util::png::encode_png;
 
     #[test]
     fn srgb_roundtrip_and_develop_is_deterministic() {

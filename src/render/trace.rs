@@ -25,8 +25,9 @@ use rayon::prelude::*;
 use super::camera::Camera;
 use super::light::{AreaLight, Environment};
 use super::material::{Background, SkinMaterial, Surface};
-use super::noise::{hash, unit};
+use super::noise::unit;
 use super::screen::{self, PixelOut};
+use crate::util::hash::hash;
 
 /// World-space triangles of all carcasses of one image, with shading attributes.
 #[derive(Clone, Debug, Default)]

@@ -63,11 +63,6 @@ pub struct TrainSummary {
     pub train_images_per_s: f64,
 }
 
-/// The model config of a run config with `nc` classes.
-pub fn model_config(cfg: &Config, nc: usize) -> Result<DetectorConfig> {
-    DetectorConfig::from_config(cfg, nc)
-}
-
 /// The config as it will run (`--smoke`, `--device` applied) and its run folder, created.
 fn prepare_run(mut cfg: Config, opts: &TrainOptions) -> Result<(Config, PathBuf)> {
     if opts.smoke {
@@ -406,7 +401,7 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let base = device_of(cfg.device)?;
     base.seed(cfg.seed);
     let ad = base.clone().autodiff();
-    let mcfg = model_config(&cfg, real.num_classes())?;
+    let mcfg = DetectorConfig::from_config(&cfg, real.num_classes())?;
     let input = mcfg.input_size();
     let mut st = TrainState::new(&cfg, &mcfg, resume.as_ref(), &run_dir, &ad, &base)?;
     if resume.is_some() {
