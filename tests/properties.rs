@@ -9,6 +9,7 @@ use chicktrain::annotations::polygon::{mask_to_polygons, rle_from_polygons};
 use chicktrain::annotations::rle::{bbox_iou, rle_iou, Rle};
 use chicktrain::model::maskrcnn::box_coder::BoxCoder;
 use proptest::prelude::*;
+use proptest::test_runner::RngSeed;
 
 fn mask_strategy() -> impl Strategy<Value = Mask> {
     (1u32..24, 1u32..24, 0.0f64..1.0).prop_flat_map(|(h, w, p)| {
@@ -32,7 +33,12 @@ fn box_strategy() -> impl Strategy<Value = [f64; 4]> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(300))]
+    // A fixed seed: every run (and CI) draws the same cases, as every random choice in
+    // chicktrain flows from a seed; a new seed is a deliberate edit, not a CI lottery.
+    #![proptest_config(ProptestConfig {
+        rng_seed: RngSeed::Fixed(0xC41C_4E17),
+        ..ProptestConfig::with_cases(300)
+    })]
 
     #[test]
     fn rle_round_trips(m in mask_strategy()) {
