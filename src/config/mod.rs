@@ -192,7 +192,24 @@ impl Config {
         }
         self.data.validate()?;
         self.train.validate()?;
-        self.model.validate(self.data.crop)
+        self.model.validate(self.data.crop)?;
+        let max_freeze = match self.model.kind() {
+            ModelKind::Yolo => 23,
+            ModelKind::Maskrcnn => 5,
+        };
+        if self.train.freeze > max_freeze {
+            bail!(
+                "train.freeze = {} must be at most {max_freeze} for model.kind = \"{}\" ({})",
+                self.train.freeze,
+                if self.model.kind() == ModelKind::Yolo { "yolo" } else { "maskrcnn" },
+                if self.model.kind() == ModelKind::Yolo {
+                    "ultralytics layer indices 0..23; 23 is the head"
+                } else {
+                    "1 = stem, 2–5 = stem and the first 1–4 ResNet stages"
+                }
+            );
+        }
+        Ok(())
     }
 }
 

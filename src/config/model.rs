@@ -35,6 +35,14 @@ impl ModelConfig {
         }
     }
 
+    /// `model.init` of either family.
+    pub fn init(&self) -> Option<&str> {
+        match self {
+            ModelConfig::Yolo(m) => m.init.as_deref(),
+            ModelConfig::Maskrcnn(m) => m.init.as_deref(),
+        }
+    }
+
     /// Channel-width multiplier of either family.
     pub fn width_mult(&self) -> f64 {
         match self {
@@ -69,6 +77,11 @@ pub struct YoloModelConfig {
     /// Mask prototypes (ultralytics: 32).
     #[serde(default = "default_prototypes")]
     pub prototypes: usize,
+    /// Weights to start from (`model.init = "PATH"`): a chicktrain checkpoint of either
+    /// family, a torchvision state dict (Mask R-CNN) or an ultralytics checkpoint (YOLO);
+    /// the format is read from the file's first bytes. Ignored by `--resume`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init: Option<String>,
 }
 
 impl Default for YoloModelConfig {
@@ -136,6 +149,11 @@ pub struct MaskRcnnModelConfig {
     pub mask_conv_dim: Option<usize>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mask_class_agnostic: Option<bool>,
+    /// Weights to start from (`model.init = "PATH"`): a chicktrain checkpoint of either
+    /// family, a torchvision state dict (Mask R-CNN) or an ultralytics checkpoint (YOLO);
+    /// the format is read from the file's first bytes. Ignored by `--resume`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init: Option<String>,
 }
 
 impl Default for MaskRcnnModelConfig {
@@ -159,6 +177,9 @@ impl ModelConfig {
         let wm = m.width_mult();
         if !(wm.is_finite() && wm > 0.0 && wm <= 4.0) {
             bail!("model.width_mult = {wm} must be in (0, 4]");
+        }
+        if self.init().is_some_and(|p| p.trim().is_empty()) {
+            bail!("model.init is empty: give the path of a weights file, or leave the key out");
         }
         match m {
             ModelConfig::Yolo(m) => {

@@ -63,6 +63,12 @@ pub struct TrainConfig {
     /// HSV jitter gains (ultralytics: 0.015, 0.7, 0.4).
     #[serde(default = "default_hsv")]
     pub hsv: [f64; 3],
+    /// Freeze the first N stages (ultralytics' `freeze`): YOLO layers `0..N` by
+    /// ultralytics' indices (≤ 23), Mask R-CNN detectron2's `FREEZE_AT` (≤ 5: 1 = stem,
+    /// 2 = stem + res2, …). Frozen weights take no gradient and their BatchNorm runs in
+    /// eval mode. 0 = train everything.
+    #[serde(default)]
+    pub freeze: usize,
 }
 
 fn default_epochs() -> usize {

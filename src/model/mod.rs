@@ -6,13 +6,18 @@
 //! - Shared by both: [`detection`] (what a model predicts, box IoU, NMS), [`layers`]
 //!   (parameter and MAC counts, upsampling), [`loss`] (overflow-free primitives) and
 //!   [`summary`] (model size).
+//! - [`weights`]: weights from files (chicktrain checkpoints, PyTorch, safetensors) as
+//!   named snapshots, and the one loader that applies them with shape checks; `freeze`
+//!   (the first N stages of either family).
 //!
 //! Models read their ground truth as [`crate::data::targets::Targets`] and nothing of the
 //! trainer: every model is built from its own typed config.
 
 pub mod detection;
+pub mod freeze;
 pub mod layers;
 pub mod loss;
 pub mod maskrcnn;
 pub mod summary;
+pub mod weights;
 pub mod yolo;

@@ -23,7 +23,7 @@ use crate::config::Config;
 
 use super::detector::{Detector, DetectorConfig};
 
-const MAGIC: &[u8] = b"CHICKTRAIN-CKPT1\n";
+use crate::model::weights::CHICKTRAIN_MAGIC as MAGIC;
 /// Header format: 2 added the model kind (`model.kind`).
 pub const FORMAT: u32 = 2;
 

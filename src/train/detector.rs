@@ -90,6 +90,14 @@ impl DetectorConfig {
         }
     }
 
+    /// Module-path prefixes of the stages `train.freeze = n` freezes (see `model::freeze`).
+    pub fn frozen_prefixes(&self, n: usize) -> Result<Vec<String>> {
+        match self {
+            DetectorConfig::Yolo(_) => crate::model::freeze::yolo_prefixes(n),
+            DetectorConfig::Maskrcnn(_) => crate::model::freeze::maskrcnn_prefixes(n),
+        }
+    }
+
     /// One line naming the architecture.
     pub fn describe(&self) -> String {
         match self {

@@ -2,7 +2,9 @@
 //! optimiser step, `ema = d·ema + (1 − d)·model` over every float tensor, BatchNorm running
 //! statistics included, with `d = 0.9999·(1 − exp(−updates / 2000))` so early updates
 //! follow the model closely. The EMA copy lives on the plain (non-autodiff) device in eval
-//! mode; it is what the trainer evaluates and saves in `best.bpk`.
+//! mode; it is what the trainer evaluates and saves in `best.bpk`. Tensors of frozen stages
+//! (`train.freeze`) are not blended: they equal the model's and stay bit-identical (a blend
+//! of two equal values can round away from them).
 
 use std::collections::VecDeque;
 
@@ -16,6 +18,8 @@ pub const TAU: f64 = 2000.0;
 pub struct Ema<M> {
     pub model: M,
     pub updates: u64,
+    /// Module-path prefixes of frozen stages (`model::freeze`), left as they are.
+    pub frozen: Vec<String>,
 }
 
 /// Every float tensor of a module, flattened, in visiting order.
@@ -33,17 +37,34 @@ impl ModuleVisitor for Collect {
 /// order. Not by `ParamId`: a checkpoint restores the ids of weights but gives BatchNorm
 /// running statistics fresh ones, so after `--resume` an id match silently froze the
 /// EMA's running statistics (found by `tests/resume.rs`).
-struct Blend {
+struct Blend<'a> {
     src: VecDeque<Tensor<1>>,
     d: f64,
+    path: Vec<String>,
+    frozen: &'a [String],
 }
 
-impl ModuleMapper for Blend {
+impl ModuleMapper for Blend<'_> {
+    // Enum variants (`Detector::Yolo`, `C3k2Inner::C3k`) are not path segments here, so
+    // stage prefixes read the same on a `Detector` and on the model inside it.
+    fn enter_module(&mut self, name: &str, container: &str) {
+        if !container.starts_with("Enum:") {
+            self.path.push(name.to_string());
+        }
+    }
+    fn exit_module(&mut self, _: &str, container: &str) {
+        if !container.starts_with("Enum:") {
+            self.path.pop();
+        }
+    }
     fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
         let s = self
             .src
             .pop_front()
             .expect("Ema: the model has fewer tensors than its EMA copy");
+        if crate::model::freeze::is_frozen(&self.path.join("."), self.frozen) {
+            return param;
+        }
         let d = self.d;
         param.map(|e| {
             let dims = e.dims();
@@ -63,7 +84,14 @@ impl<M: Module> Ema<M> {
         Ema {
             model: model.valid(),
             updates,
+            frozen: Vec::new(),
         }
+    }
+
+    /// Leaves the tensors under `prefixes` (frozen stages) out of every blend.
+    pub fn with_frozen(mut self, prefixes: Vec<String>) -> Self {
+        self.frozen = prefixes;
+        self
     }
 
     /// Decay used by the next update.
@@ -78,7 +106,12 @@ impl<M: Module> Ema<M> {
         let mut c = Collect(VecDeque::new());
         model.valid().visit(&mut c);
         let m = self.model.clone();
-        self.model = m.map(&mut Blend { src: c.0, d });
+        self.model = m.map(&mut Blend {
+            src: c.0,
+            d,
+            path: Vec::new(),
+            frozen: &self.frozen,
+        });
     }
 }
 

@@ -11,6 +11,7 @@ pub mod device;
 pub mod divergence;
 pub mod ema;
 pub mod evaluate;
+pub mod init;
 pub mod interrupt;
 pub mod loader;
 pub mod optim;

@@ -14,6 +14,8 @@ use crate::config::Config;
 use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header};
 use super::detector::{Detector, DetectorConfig};
 use super::ema::Ema;
+use super::init::load_init;
+use crate::model::freeze::freeze;
 use super::optim;
 use super::run_files::{self, EpochRecord};
 
@@ -30,7 +32,9 @@ pub struct TrainState {
 }
 
 impl TrainState {
-    /// A new model of `mcfg` on the autodiff device `ad`, or the state of `resume`.
+    /// A new model of `mcfg` on the autodiff device `ad` (started from `model.init` if
+    /// set), or the state of `resume` (which ignores `model.init`); `train.freeze` applied
+    /// to either. `say` prints what was loaded.
     pub fn new(
         cfg: &Config,
         mcfg: &DetectorConfig,
@@ -38,11 +42,26 @@ impl TrainState {
         run_dir: &Path,
         ad: &Device,
         base: &Device,
+        say: &dyn Fn(String),
     ) -> Result<TrainState> {
         let optim = optim::build(&cfg.train);
+        let frozen = mcfg.frozen_prefixes(cfg.train.freeze)?;
+        if !frozen.is_empty() {
+            say(format!(
+                "train.freeze = {}: frozen (no gradients, BatchNorm in eval mode): {}",
+                cfg.train.freeze,
+                frozen.join(", ")
+            ));
+        }
         let Some(ck) = resume else {
-            let model = mcfg.init(ad);
-            let ema = Ema::new(&model, 0);
+            let mut model = mcfg.init(ad);
+            if let Some(p) = cfg.model.init() {
+                let (m, note) = load_init(model, Path::new(p), base)?;
+                say(note);
+                model = m;
+            }
+            let model = freeze(model, &frozen);
+            let ema = Ema::new(&model, 0).with_frozen(frozen);
             return Ok(TrainState {
                 model,
                 ema,
@@ -57,11 +76,18 @@ impl TrainState {
         if let Some(why) = mcfg.mismatch(&ck.header.model) {
             bail!("--resume: cannot continue from {}: {why}", last.display());
         }
+        if let Some(p) = cfg.model.init() {
+            say(format!(
+                "model.init = {p} is not used: --resume continues from {}",
+                last.display()
+            ));
+        }
         let in_last = || format!("--resume: in {}", last.display());
-        let model = ck.model("model", ad).with_context(in_last)?;
+        let model = freeze(ck.model("model", ad).with_context(in_last)?, &frozen);
         let ema = Ema {
             model: ck.model("ema", base).with_context(in_last)?,
             updates: ck.header.ema_updates,
+            frozen,
         };
         let optim = ck.optimizer(optim).with_context(in_last)?;
         let records = run_files::read_metrics(run_dir, ck.header.epoch)?;

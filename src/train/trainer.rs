@@ -403,7 +403,7 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let ad = base.clone().autodiff();
     let mcfg = DetectorConfig::from_config(&cfg, real.num_classes())?;
     let input = mcfg.input_size();
-    let mut st = TrainState::new(&cfg, &mcfg, resume.as_ref(), &run_dir, &ad, &base)?;
+    let mut st = TrainState::new(&cfg, &mcfg, resume.as_ref(), &run_dir, &ad, &base, &say)?;
     if resume.is_some() {
         say(format!("resuming after epoch {}", st.epoch));
     }

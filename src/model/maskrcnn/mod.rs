@@ -25,6 +25,7 @@ pub mod roi_align;
 pub mod roi_heads;
 pub mod rpn;
 pub mod sampler;
+pub mod torchvision;
 
 use burn::module::Module;
 use burn::tensor::activation::sigmoid;
@@ -209,6 +210,15 @@ impl MaskRcnnConfig {
             config: self.clone(),
         }
     }
+}
+
+/// Whether the tensor at module path `path` is sized by the class count (the box
+/// predictor's logits and deltas, the mask logits): those are re-initialised when weights
+/// come from a model with another class count (`model.init`).
+pub fn class_dependent(path: &str) -> bool {
+    path.starts_with("box_head.cls_score.")
+        || path.starts_with("box_head.bbox_pred.")
+        || path.starts_with("mask_head.predictor.")
 }
 
 /// Named training losses (each `[1]`) and their sum.

@@ -216,6 +216,14 @@ pub struct YoloOutput {
     pub grid: AnchorGrid,
 }
 
+/// Whether the tensor at module path `path` is sized by the class count: the class
+/// branch of the head (ultralytics' `cv3`, whose hidden width is `max(c, min(nc, 100))`
+/// too). Those are re-initialised when weights come from a model with another class count
+/// (`model.init`), as ultralytics does.
+pub fn class_dependent(path: &str) -> bool {
+    path.starts_with("head.cls.")
+}
+
 #[derive(Module, Debug)]
 pub struct YoloSeg {
     pub backbone: Backbone,

@@ -1,0 +1,144 @@
+//! `model.init = "PATH"`: start training from weights in a file. The format is read from
+//! the first bytes ([`weights::sniff`]), never the extension, and every source goes
+//! through the same loader ([`weights::apply`]) with the same checks:
+//!
+//! | file | model | what is loaded |
+//! |---|---|---|
+//! | chicktrain checkpoint (`.bpk`, either family) | same family | its `ema` weights (what it evaluates and ships), every tensor; with another class count the class-dependent ones are re-initialised and named |
+//! | PyTorch zip / safetensors | Mask R-CNN | a torchvision ImageNet ResNet (backbone) or `maskrcnn_resnet50_fpn` state dict ([`torchvision`]) |
+//! | PyTorch zip / safetensors | YOLO | the ultralytics importer (not in this branch) |
+//!
+//! `--resume` ignores `model.init`: the run's `last.bpk` wins.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use burn::tensor::Device;
+
+use crate::model::maskrcnn::{self, torchvision};
+use crate::model::weights::{self, Applied, Format};
+use crate::model::yolo;
+
+use super::checkpoint::Checkpoint;
+use super::detector::Detector;
+
+/// `model`, with the weights of `path` loaded; the second value says what was loaded
+/// (printed by the trainer). `device` builds the source model of a checkpoint.
+pub fn load_init(model: Detector, path: &Path, device: &Device) -> Result<(Detector, String)> {
+    let origin = format!("model.init {}", path.display());
+    let bytes = std::fs::read(path).with_context(|| format!("{origin}: cannot read the file"))?;
+    let Some(format) = weights::sniff(&bytes) else {
+        bail!(
+            "{origin}: not a chicktrain checkpoint, PyTorch file or safetensors file (first bytes {:02x?})",
+            &bytes[..bytes.len().min(8)]
+        );
+    };
+    let (model, applied, what) = match (format, model) {
+        (Format::Chicktrain, model) => {
+            let ck = Checkpoint::from_bytes(&bytes, path).with_context(|| origin.clone())?;
+            let src = &ck.header.model;
+            let want = match &model {
+                Detector::Yolo(_) => crate::config::ModelKind::Yolo,
+                Detector::MaskRcnn(_) => crate::config::ModelKind::Maskrcnn,
+            };
+            if src.kind() != want {
+                bail!(
+                    "{origin}: it holds a {:?} model ({}), the config asks for {want:?}: weights of one family cannot start the other",
+                    src.kind(),
+                    src.describe()
+                );
+            }
+            let what = format!(
+                "{} ({}, epoch {})",
+                format.name(),
+                src.describe(),
+                ck.header.epoch
+            );
+            let source = ck.model("ema", device).with_context(|| origin.clone())?;
+            let (model, applied) = match (model, source) {
+                (Detector::Yolo(m), Detector::Yolo(s)) => {
+                    let (m, a) =
+                        weights::apply(m, weights::collect(&s), &yolo::class_dependent, &origin)?;
+                    (Detector::Yolo(m), a)
+                }
+                (Detector::MaskRcnn(m), Detector::MaskRcnn(s)) => {
+                    let (m, a) = weights::apply(
+                        m,
+                        weights::collect(&s),
+                        &maskrcnn::class_dependent,
+                        &origin,
+                    )?;
+                    (Detector::MaskRcnn(m), a)
+                }
+                _ => unreachable!("kinds checked above"),
+            };
+            (model, applied, what)
+        }
+        (Format::TorchLegacy | Format::TorchZip | Format::Safetensors, Detector::MaskRcnn(m)) => {
+            let tensors = match format {
+                Format::Safetensors => weights::safetensors::read(&bytes),
+                _ => weights::pytorch::read(&bytes),
+            }
+            .with_context(|| origin.clone())?;
+            let nc = m.num_classes();
+            let mapped = torchvision::map_state_dict(tensors, nc).with_context(|| origin.clone())?;
+            let what = match (mapped.kind, mapped.file_classes) {
+                (torchvision::TorchvisionKind::ResNet, _) => {
+                    format!("{}, torchvision ResNet (backbone only)", format.name())
+                }
+                (_, Some(k)) => format!(
+                    "{}, torchvision Mask R-CNN ({} classes with background)",
+                    format.name(),
+                    k
+                ),
+                (_, None) => format!("{}, torchvision Mask R-CNN", format.name()),
+            };
+            let (m, a) = weights::apply_named(
+                m,
+                mapped.snapshots,
+                &torchvision::class_dependent(mapped.kind),
+                &origin,
+                &mapped.file_keys,
+            )?;
+            (Detector::MaskRcnn(m), a, what)
+        }
+        // MERGE POINT (branch `ultra`): ultralytics `.pt` / safetensors → YOLO snapshots,
+        // then `weights::apply(m, snapshots, &yolo::class_dependent, &origin)` as above.
+        (Format::TorchLegacy | Format::TorchZip | Format::Safetensors, Detector::Yolo(_)) => {
+            bail!(
+                "{origin}: ultralytics import not built in this branch (a {} for a YOLO model); start from a chicktrain checkpoint instead",
+                format.name()
+            )
+        }
+    };
+    Ok((model, describe(path, &what, &applied)))
+}
+
+/// One line (two with re-initialised tensors) saying what was loaded.
+fn describe(path: &Path, what: &str, a: &Applied) -> String {
+    let mut s = format!(
+        "model.init: loaded {} tensors from {} ({what})",
+        a.loaded,
+        path.display()
+    );
+    if !a.reinitialised.is_empty() {
+        // Group by module (path without the tensor name) so a head is one entry.
+        let mut groups: BTreeMap<String, usize> = BTreeMap::new();
+        for p in &a.reinitialised {
+            let m = p.rsplit_once('.').map(|x| x.0).unwrap_or(p);
+            *groups.entry(m.to_string()).or_default() += 1;
+        }
+        let list: Vec<&str> = groups.keys().map(|k| k.as_str()).collect();
+        s.push_str(&format!(
+            "\nmodel.init: {} tensors keep their fresh initialisation (class count or architecture of the file differs there): {}",
+            a.reinitialised.len(),
+            if list.len() > 12 {
+                format!("{} … ({} modules)", list[..12].join(", "), list.len())
+            } else {
+                list.join(", ")
+            }
+        ));
+    }
+    s
+}
