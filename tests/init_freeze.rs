@@ -1,0 +1,150 @@
+//! `model.init` from a chicktrain checkpoint and `train.freeze` (issue 15 §1, issue 14 §3):
+//! a `--smoke` run started from another run's `best.bpk` loads every tensor; with
+//! `train.freeze = 3` the tensors of ultralytics layers 0–2 (weights, biases and BatchNorm
+//! running statistics) are bit-identical to the start after training steps, in the raw
+//! weights and in the EMA, also across `--resume`, while the rest trains; a model with
+//! another class count re-initialises exactly the class branch and says so; another family,
+//! a PyTorch file for YOLO and a garbage file are clean errors naming the file.
+
+mod common;
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use burn::tensor::Device;
+use chicktrain::model::weights::{collect, snapshot_data};
+use chicktrain::model::yolo::YoloSegConfig;
+use chicktrain::train::checkpoint::Checkpoint;
+use chicktrain::train::detector::{Detector, DetectorConfig};
+use chicktrain::train::init::load_init;
+use chicktrain::train::trainer::{train, TrainOptions};
+use common::smoke::{shipped, smoke_opts};
+use common::*;
+
+/// Every float tensor of section `section` of a checkpoint, by module path.
+fn tensors(ck: &Path, section: &str) -> HashMap<String, Vec<f32>> {
+    let ck = Checkpoint::load(ck).unwrap();
+    let m = ck.model(section, &Device::flex()).unwrap();
+    let snaps = match m {
+        Detector::Yolo(m) => collect(&m),
+        Detector::MaskRcnn(m) => collect(&m),
+    };
+    snaps
+        .into_iter()
+        .map(|s| (s.name.clone(), snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap()))
+        .collect()
+}
+
+fn frozen(path: &str) -> bool {
+    ["backbone.l0.", "backbone.l1.", "backbone.l2."]
+        .iter()
+        .any(|p| path.starts_with(p))
+}
+
+#[test]
+fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
+    let d = tmp("init-freeze");
+    let (a, b) = (d.join("a"), d.join("b"));
+    train(shipped("quickstart", &a, &["train.epochs=1"]), &smoke_opts(&a)).unwrap();
+    let start = a.join("run/best.bpk");
+    let init = format!("model.init=\"{}\"", start.display());
+    let sets = [init.as_str(), "train.freeze=3", "train.epochs=1"];
+    train(shipped("quickstart", &b, &sets), &smoke_opts(&b)).unwrap();
+
+    let t0 = tensors(&start, "ema");
+    let n_frozen = t0.keys().filter(|k| frozen(k)).count();
+    assert!(n_frozen > 20, "layers 0–2 hold {n_frozen} tensors");
+    assert!(t0.keys().any(|k| frozen(k) && k.ends_with("running_mean")));
+    let check = |ck: &Path, section: &str| {
+        let t = tensors(ck, section);
+        assert_eq!(t.len(), t0.len());
+        let mut moved = 0;
+        for (k, v) in &t {
+            if frozen(k) {
+                assert!(v == &t0[k], "{section} {k} changed although frozen");
+            } else if v != &t0[k] {
+                moved += 1;
+            }
+        }
+        assert!(moved > 20, "{section}: only {moved} unfrozen tensors changed");
+    };
+    check(&b.join("run/last.bpk"), "model");
+    check(&b.join("run/last.bpk"), "ema");
+
+    // --resume keeps them frozen (and ignores model.init: it is not reloaded).
+    let more = [init.as_str(), "train.freeze=3", "train.epochs=2"];
+    let opts = TrainOptions {
+        run_dir: Some(b.join("run")),
+        smoke: true,
+        resume: true,
+        quiet: true,
+        ..Default::default()
+    };
+    train(shipped("quickstart", &b, &more), &opts).unwrap();
+    assert_eq!(Checkpoint::load(&b.join("run/last.bpk")).unwrap().header.epoch, 2);
+    check(&b.join("run/last.bpk"), "model");
+    check(&b.join("run/last.bpk"), "ema");
+
+    // Another class count: the class branch (and only it) starts fresh, and says so.
+    let dev = Device::flex();
+    let ck = Checkpoint::load(&start).unwrap();
+    let DetectorConfig::Yolo(c) = &ck.header.model else { panic!() };
+    let c3 = YoloSegConfig { num_classes: 3, ..c.clone() };
+    let (_, note) = load_init(Detector::Yolo(c3.init(&dev)), &start, &dev).unwrap();
+    assert!(note.contains("keep their fresh initialisation"), "{note}");
+    let listed = note.lines().nth(1).unwrap().split(": ").last().unwrap();
+    assert!(listed.split(", ").all(|m| m.starts_with("head.cls.")), "{note}");
+
+    // Another family, a PyTorch file for YOLO, garbage: clean errors naming the file.
+    let mcfg = chicktrain::model::maskrcnn::MaskRcnnConfig::new(18, 1).with_width_mult(0.25);
+    let e = format!(
+        "{:#}",
+        load_init(Detector::MaskRcnn(mcfg.init(&dev)), &start, &dev).unwrap_err()
+    );
+    assert!(e.contains("best.bpk") && e.contains("cannot start the other"), "{e}");
+    let pth = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/torchvision/resnet18_w8.pth");
+    let e = format!("{:#}", load_init(Detector::Yolo(c.init(&dev)), &pth, &dev).unwrap_err());
+    assert!(e.contains("resnet18_w8.pth") && e.contains("ultralytics import not built in this branch"), "{e}");
+    let g = d.join("garbage.bpk");
+    std::fs::write(&g, b"CHICKTRAIN-CKPT1\n\x05").unwrap();
+    let out = run(&smoke_args(&d.join("c"), &[&format!("model.init=\"{}\"", g.display())]));
+    assert_clean_error(&out, &["garbage.bpk", "truncated"]);
+    let out = run(&smoke_args(&d.join("c"), &["train.freeze=24"]));
+    assert_clean_error(&out, &["train.freeze = 24 must be at most 23"]);
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// Mask R-CNN, `train.freeze = 2` (detectron2's default `FREEZE_AT`): the stem and res2
+/// (weights and BatchNorm statistics) do not change over an epoch of steps (epoch 1 →
+/// epoch 2 through `--resume`), res3 onwards does.
+#[test]
+fn maskrcnn_freeze_at_2_keeps_stem_and_res2() {
+    let d = tmp("freeze-mrcnn");
+    let sets = ["train.freeze=2", "train.epochs=1"];
+    train(shipped("maskrcnn_r50_syn250", &d, &sets), &smoke_opts(&d)).unwrap();
+    let last = d.join("run/last.bpk");
+    let (m1, e1) = (tensors(&last, "model"), tensors(&last, "ema"));
+    let opts = TrainOptions {
+        run_dir: Some(d.join("run")),
+        smoke: true,
+        resume: true,
+        quiet: true,
+        ..Default::default()
+    };
+    train(shipped("maskrcnn_r50_syn250", &d, &["train.freeze=2", "train.epochs=2"]), &opts).unwrap();
+    let (m2, e2) = (tensors(&last, "model"), tensors(&last, "ema"));
+    let frozen = |k: &str| k.starts_with("backbone.stem.") || k.starts_with("backbone.stages.0.");
+    for (before, after, what) in [(&m1, &m2, "model"), (&e1, &e2, "ema")] {
+        let mut moved = 0;
+        for (k, v) in after {
+            if frozen(k) {
+                assert!(v == &before[k], "{what} {k} changed although frozen");
+            } else if v != &before[k] {
+                moved += 1;
+            }
+        }
+        assert!(moved > 20, "{what}: only {moved} unfrozen tensors changed");
+    }
+    assert!(m1.keys().any(|k| frozen(k) && k.ends_with("bn.running_var")));
+    std::fs::remove_dir_all(&d).unwrap();
+}
