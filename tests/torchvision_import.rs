@@ -228,3 +228,36 @@ fn other_class_counts_reinitialise_the_predictors_and_mismatches_name_the_key() 
     assert!(e.contains("missing.pth") && e.contains("cannot read"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Full-size torchvision files (not committed: `full_size.py` writes them, see its
+/// docstring): ImageNet ResNet-18/34/50/101 into the backbone of the same depth, and
+/// `maskrcnn_resnet50_fpn` (v1, 2 and 91 classes) into the paper preset with one class.
+#[test]
+#[ignore = "needs CHICKTRAIN_TV_FULL=DIR from tests/fixtures/torchvision/full_size.py"]
+fn full_size_torchvision_state_dicts_fit() {
+    let dir = PathBuf::from(std::env::var("CHICKTRAIN_TV_FULL").expect("CHICKTRAIN_TV_FULL=DIR"));
+    let dev = Device::flex();
+    for depth in [18, 34, 50, 101] {
+        let m = MaskRcnnConfig::new(depth, 1).init(&dev);
+        let (_, note) =
+            load_init(Detector::MaskRcnn(m), &dir.join(format!("resnet{depth}.pth")), &dev).unwrap();
+        eprintln!("R{depth}: {note}");
+        assert!(note.contains("torchvision ResNet (backbone only)"), "{note}");
+    }
+    let (_, note) = load_init(
+        Detector::MaskRcnn(MaskRcnnConfig::paper(50, 1).init(&dev)),
+        &dir.join("maskrcnn_resnet50_fpn_2.pth"),
+        &dev,
+    )
+    .unwrap();
+    eprintln!("{note}");
+    assert!(!note.contains("fresh initialisation"), "{note}");
+    let (_, note) = load_init(
+        Detector::MaskRcnn(MaskRcnnConfig::paper(50, 1).init(&dev)),
+        &dir.join("maskrcnn_resnet50_fpn_91.pth"),
+        &dev,
+    )
+    .unwrap();
+    eprintln!("{note}");
+    assert!(note.contains("6 tensors keep their fresh initialisation"), "{note}");
+}

@@ -34,6 +34,8 @@ pub fn load_init(model: Detector, path: &Path, device: &Device) -> Result<(Detec
             &bytes[..bytes.len().min(8)]
         );
     };
+    // Why tensors may keep their initialisation, for the message.
+    let mut fresh_why = "the file's class count differs there";
     let (model, applied, what) = match (format, model) {
         (Format::Chicktrain, model) => {
             let ck = Checkpoint::from_bytes(&bytes, path).with_context(|| origin.clone())?;
@@ -43,10 +45,15 @@ pub fn load_init(model: Detector, path: &Path, device: &Device) -> Result<(Detec
                 Detector::MaskRcnn(_) => crate::config::ModelKind::Maskrcnn,
             };
             if src.kind() != want {
+                let name = |k| match k {
+                    crate::config::ModelKind::Yolo => "model.kind = \"yolo\"",
+                    crate::config::ModelKind::Maskrcnn => "model.kind = \"maskrcnn\"",
+                };
                 bail!(
-                    "{origin}: it holds a {:?} model ({}), the config asks for {want:?}: weights of one family cannot start the other",
-                    src.kind(),
-                    src.describe()
+                    "{origin}: it holds a {} model ({}), the config asks for {}: weights of one family cannot start the other",
+                    name(src.kind()),
+                    src.describe(),
+                    name(want)
                 );
             }
             let what = format!(
@@ -83,6 +90,9 @@ pub fn load_init(model: Detector, path: &Path, device: &Device) -> Result<(Detec
             .with_context(|| origin.clone())?;
             let nc = m.num_classes();
             let mapped = torchvision::map_state_dict(tensors, nc).with_context(|| origin.clone())?;
+            if mapped.kind == torchvision::TorchvisionKind::ResNet {
+                fresh_why = "an ImageNet ResNet file holds the backbone only";
+            }
             let what = match (mapped.kind, mapped.file_classes) {
                 (torchvision::TorchvisionKind::ResNet, _) => {
                     format!("{}, torchvision ResNet (backbone only)", format.name())
@@ -112,11 +122,11 @@ pub fn load_init(model: Detector, path: &Path, device: &Device) -> Result<(Detec
             )
         }
     };
-    Ok((model, describe(path, &what, &applied)))
+    Ok((model, describe(path, &what, &applied, fresh_why)))
 }
 
 /// One line (two with re-initialised tensors) saying what was loaded.
-fn describe(path: &Path, what: &str, a: &Applied) -> String {
+fn describe(path: &Path, what: &str, a: &Applied, fresh_why: &str) -> String {
     let mut s = format!(
         "model.init: loaded {} tensors from {} ({what})",
         a.loaded,
@@ -131,7 +141,7 @@ fn describe(path: &Path, what: &str, a: &Applied) -> String {
         }
         let list: Vec<&str> = groups.keys().map(|k| k.as_str()).collect();
         s.push_str(&format!(
-            "\nmodel.init: {} tensors keep their fresh initialisation (class count or architecture of the file differs there): {}",
+            "\nmodel.init: {} tensors keep their fresh initialisation ({fresh_why}): {}",
             a.reinitialised.len(),
             if list.len() > 12 {
                 format!("{} … ({} modules)", list[..12].join(", "), list.len())

@@ -2,9 +2,11 @@
 //! 3×3 conv of a bottleneck) with selectable depth and a width multiplier.
 //!
 //! Depths 18/34 use basic blocks (two 3×3 convs), 50/101 bottlenecks (1×1, 3×3, 1×1 with
-//! 4× expansion). BatchNorm uses PyTorch's defaults (eps 1e-5, momentum 0.1) and is trained,
-//! not frozen (random init, no ImageNet weights here). Outputs C2–C5 (strides 4–32) for the
-//! FPN; no classifier.
+//! 4× expansion). BatchNorm uses PyTorch's defaults (eps 1e-5, momentum 0.1) and is trained
+//! unless `train.freeze` freezes its stage (`model::freeze`). Module paths follow
+//! torchvision's layout (`stem` = `conv1`/`bn1`, `stages.i.blocks.j.convs.k` =
+//! `layer{i+1}.{j}.conv{k+1}`), so ImageNet weights map one to one (`super::torchvision`).
+//! Outputs C2–C5 (strides 4–32) for the FPN; no classifier.
 
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
