@@ -31,7 +31,12 @@ fn tensors(ck: &Path, section: &str) -> HashMap<String, Vec<f32>> {
     };
     snaps
         .into_iter()
-        .map(|s| (s.name.clone(), snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap()))
+        .map(|s| {
+            (
+                s.name.clone(),
+                snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap(),
+            )
+        })
         .collect()
 }
 
@@ -45,7 +50,11 @@ fn frozen(path: &str) -> bool {
 fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
     let d = tmp("init-freeze");
     let (a, b) = (d.join("a"), d.join("b"));
-    train(shipped("quickstart", &a, &["train.epochs=1"]), &smoke_opts(&a)).unwrap();
+    train(
+        shipped("quickstart", &a, &["train.epochs=1"]),
+        &smoke_opts(&a),
+    )
+    .unwrap();
     let start = a.join("run/best.bpk");
     let init = format!("model.init=\"{}\"", start.display());
     let sets = [init.as_str(), "train.freeze=3", "train.epochs=1"];
@@ -66,7 +75,10 @@ fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
                 moved += 1;
             }
         }
-        assert!(moved > 20, "{section}: only {moved} unfrozen tensors changed");
+        assert!(
+            moved > 20,
+            "{section}: only {moved} unfrozen tensors changed"
+        );
     };
     check(&b.join("run/last.bpk"), "model");
     check(&b.join("run/last.bpk"), "ema");
@@ -81,19 +93,33 @@ fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
         ..Default::default()
     };
     train(shipped("quickstart", &b, &more), &opts).unwrap();
-    assert_eq!(Checkpoint::load(&b.join("run/last.bpk")).unwrap().header.epoch, 2);
+    assert_eq!(
+        Checkpoint::load(&b.join("run/last.bpk"))
+            .unwrap()
+            .header
+            .epoch,
+        2
+    );
     check(&b.join("run/last.bpk"), "model");
     check(&b.join("run/last.bpk"), "ema");
 
     // Another class count: the class branch (and only it) starts fresh, and says so.
     let dev = Device::flex();
     let ck = Checkpoint::load(&start).unwrap();
-    let DetectorConfig::Yolo(c) = &ck.header.model else { panic!() };
-    let c3 = YoloSegConfig { num_classes: 3, ..c.clone() };
+    let DetectorConfig::Yolo(c) = &ck.header.model else {
+        panic!()
+    };
+    let c3 = YoloSegConfig {
+        num_classes: 3,
+        ..c.clone()
+    };
     let (_, note) = load_init(Detector::Yolo(c3.init(&dev)), &start, &dev).unwrap();
     assert!(note.contains("keep their fresh initialisation"), "{note}");
     let listed = note.lines().nth(1).unwrap().split(": ").last().unwrap();
-    assert!(listed.split(", ").all(|m| m.starts_with("head.cls.")), "{note}");
+    assert!(
+        listed.split(", ").all(|m| m.starts_with("head.cls.")),
+        "{note}"
+    );
 
     // Another family, a PyTorch file for YOLO, garbage: clean errors naming the file.
     let mcfg = chicktrain::model::maskrcnn::MaskRcnnConfig::new(18, 1).with_width_mult(0.25);
@@ -101,13 +127,26 @@ fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
         "{:#}",
         load_init(Detector::MaskRcnn(mcfg.init(&dev)), &start, &dev).unwrap_err()
     );
-    assert!(e.contains("best.bpk") && e.contains("cannot start the other"), "{e}");
-    let pth = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/torchvision/resnet18_w8.pth");
-    let e = format!("{:#}", load_init(Detector::Yolo(c.init(&dev)), &pth, &dev).unwrap_err());
-    assert!(e.contains("resnet18_w8.pth") && e.contains("ultralytics import not built in this branch"), "{e}");
+    assert!(
+        e.contains("best.bpk") && e.contains("cannot start the other"),
+        "{e}"
+    );
+    let pth =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/torchvision/resnet18_w8.pth");
+    let e = format!(
+        "{:#}",
+        load_init(Detector::Yolo(c.init(&dev)), &pth, &dev).unwrap_err()
+    );
+    assert!(
+        e.contains("resnet18_w8.pth") && e.contains("ultralytics import not built in this branch"),
+        "{e}"
+    );
     let g = d.join("garbage.bpk");
     std::fs::write(&g, b"CHICKTRAIN-CKPT1\n\x05").unwrap();
-    let out = run(&smoke_args(&d.join("c"), &[&format!("model.init=\"{}\"", g.display())]));
+    let out = run(&smoke_args(
+        &d.join("c"),
+        &[&format!("model.init=\"{}\"", g.display())],
+    ));
     assert_clean_error(&out, &["garbage.bpk", "truncated"]);
     let out = run(&smoke_args(&d.join("c"), &["train.freeze=24"]));
     assert_clean_error(&out, &["train.freeze = 24 must be at most 23"]);
@@ -131,7 +170,15 @@ fn maskrcnn_freeze_at_2_keeps_stem_and_res2() {
         quiet: true,
         ..Default::default()
     };
-    train(shipped("maskrcnn_r50_syn250", &d, &["train.freeze=2", "train.epochs=2"]), &opts).unwrap();
+    train(
+        shipped(
+            "maskrcnn_r50_syn250",
+            &d,
+            &["train.freeze=2", "train.epochs=2"],
+        ),
+        &opts,
+    )
+    .unwrap();
     let (m2, e2) = (tensors(&last, "model"), tensors(&last, "ema"));
     let frozen = |k: &str| k.starts_with("backbone.stem.") || k.starts_with("backbone.stages.0.");
     for (before, after, what) in [(&m1, &m2, "model"), (&e1, &e2, "ema")] {
@@ -145,6 +192,8 @@ fn maskrcnn_freeze_at_2_keeps_stem_and_res2() {
         }
         assert!(moved > 20, "{what}: only {moved} unfrozen tensors changed");
     }
-    assert!(m1.keys().any(|k| frozen(k) && k.ends_with("bn.running_var")));
+    assert!(m1
+        .keys()
+        .any(|k| frozen(k) && k.ends_with("bn.running_var")));
     std::fs::remove_dir_all(&d).unwrap();
 }

@@ -11,8 +11,8 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, Tensor, TensorData};
-use chicktrain::model::maskrcnn::roi_heads::RoiHeadsConfig;
 use chicktrain::model::maskrcnn::mask_head::MaskHeadConfig;
+use chicktrain::model::maskrcnn::roi_heads::RoiHeadsConfig;
 use chicktrain::model::maskrcnn::torchvision::{class_dependent, map_state_dict, TorchvisionKind};
 use chicktrain::model::maskrcnn::{MaskRcnn, MaskRcnnConfig, STRIDES};
 use chicktrain::model::weights::{self, apply_named, snapshot_data};
@@ -116,10 +116,17 @@ fn resnet18_state_dicts_give_torchvision_stages() {
         .unwrap();
         // 20 convs + 20 BatchNorms × 4 tensors (fc and num_batches_tracked dropped).
         assert_eq!(applied.loaded, 20 + 20 * 4, "{file}");
-        assert!(applied.reinitialised.iter().all(|p| !p.starts_with("backbone.")));
+        assert!(applied
+            .reinitialised
+            .iter()
+            .all(|p| !p.starts_with("backbone.")));
         let c = model.backbone.forward(x.clone());
         for (i, t) in c.into_iter().enumerate() {
-            check(&format!("{file} C{}", i + 2), t, &r[&format!("r18.c{}", i + 2)]);
+            check(
+                &format!("{file} C{}", i + 2),
+                t,
+                &r[&format!("r18.c{}", i + 2)],
+            );
         }
     }
 }
@@ -131,13 +138,23 @@ fn maskrcnn_state_dict_gives_torchvision_features_rpn_and_heads() {
     let path = fixture("maskrcnn_r50_w8.pth");
     let (det, note) = load_init(Detector::MaskRcnn(fixture_maskrcnn(&dev)), &path, &dev).unwrap();
     eprintln!("{note}");
-    assert!(note.contains("torchvision Mask R-CNN (2 classes with background)"), "{note}");
-    assert!(!note.contains("fresh initialisation"), "2 classes = 1 + background: all load: {note}");
+    assert!(
+        note.contains("torchvision Mask R-CNN (2 classes with background)"),
+        "{note}"
+    );
+    assert!(
+        !note.contains("fresh initialisation"),
+        "2 classes = 1 + background: all load: {note}"
+    );
     let Detector::MaskRcnn(m) = det else { panic!() };
     let x: Tensor<4> = tensor(&r["x"], &dev);
     let feats = m.fpn.forward(m.backbone.forward(x));
     for (i, f) in feats.iter().enumerate() {
-        check(&format!("P{}", i + 2), f.clone(), &r[&format!("mr.p{}", i + 2)]);
+        check(
+            &format!("P{}", i + 2),
+            f.clone(),
+            &r[&format!("mr.p{}", i + 2)],
+        );
     }
     let rpn = m.rpn.forward(&feats, &STRIDES);
     check("RPN objectness logits", rpn.logits, &r["mr.rpn_logits"]);
@@ -148,17 +165,29 @@ fn maskrcnn_state_dict_gives_torchvision_features_rpn_and_heads() {
     let (cls, deltas) = m.box_head.forward(tensor(&r["mr.pooled"], &dev));
     let t_cls = r["mr.cls"].to_vec_f32();
     let want_cls: Vec<f32> = t_cls.chunks(2).flat_map(|c| [c[1], c[0]]).collect();
-    check("box head class logits", cls, &TensorData::new(want_cls, [3, 2]));
+    check(
+        "box head class logits",
+        cls,
+        &TensorData::new(want_cls, [3, 2]),
+    );
     let t_box = r["mr.box"].to_vec_f32();
     let want_box: Vec<f32> = t_box.chunks(8).flat_map(|c| c[4..].to_vec()).collect();
-    check("box head deltas", deltas, &TensorData::new(want_box, [3, 4]));
+    check(
+        "box head deltas",
+        deltas,
+        &TensorData::new(want_box, [3, 4]),
+    );
     let mask = m.mask_head.forward(tensor(&r["mr.mask_in"], &dev));
     let t_mask = r["mr.mask"].to_vec_f32();
     let want_mask: Vec<f32> = t_mask
         .chunks(2 * 28 * 28)
         .flat_map(|c| c[28 * 28..].to_vec())
         .collect();
-    check("mask logits", mask, &TensorData::new(want_mask, [3, 1, 28, 28]));
+    check(
+        "mask logits",
+        mask,
+        &TensorData::new(want_mask, [3, 1, 28, 28]),
+    );
 }
 
 #[test]
@@ -171,12 +200,25 @@ fn other_class_counts_reinitialise_the_predictors_and_mismatches_name_the_key() 
         .clone()
         .with_width_mult(0.125)
         .with_fpn_channels(16)
-        .with_roi(RoiHeadsConfig { fc_dim: 32, ..p.roi.clone() })
-        .with_mask(MaskHeadConfig { conv_dim: 16, ..p.mask.clone() })
+        .with_roi(RoiHeadsConfig {
+            fc_dim: 32,
+            ..p.roi.clone()
+        })
+        .with_mask(MaskHeadConfig {
+            conv_dim: 16,
+            ..p.mask.clone()
+        })
         .init(&dev);
     let (_, note) = load_init(Detector::MaskRcnn(m3), &path, &dev).unwrap();
-    assert!(note.contains("6 tensors keep their fresh initialisation"), "{note}");
-    for k in ["box_head.cls_score", "box_head.bbox_pred", "mask_head.predictor"] {
+    assert!(
+        note.contains("6 tensors keep their fresh initialisation"),
+        "{note}"
+    );
+    for k in [
+        "box_head.cls_score",
+        "box_head.bbox_pred",
+        "mask_head.predictor",
+    ] {
         assert!(note.contains(k), "{note}");
     }
 
@@ -216,16 +258,26 @@ fn other_class_counts_reinitialise_the_predictors_and_mismatches_name_the_key() 
         let p = dir.join(name);
         std::fs::write(&p, &b).unwrap();
         let m = fixture_maskrcnn(&dev);
-        let e = format!("{:#}", load_init(Detector::MaskRcnn(m), &p, &dev).unwrap_err());
+        let e = format!(
+            "{:#}",
+            load_init(Detector::MaskRcnn(m), &p, &dev).unwrap_err()
+        );
         assert!(e.contains(name), "{name}: {e}");
         eprintln!("{name}: {e}");
     }
     let e = format!(
         "{:#}",
-        load_init(Detector::MaskRcnn(fixture_maskrcnn(&dev)), &dir.join("missing.pth"), &dev)
-            .unwrap_err()
+        load_init(
+            Detector::MaskRcnn(fixture_maskrcnn(&dev)),
+            &dir.join("missing.pth"),
+            &dev
+        )
+        .unwrap_err()
     );
-    assert!(e.contains("missing.pth") && e.contains("cannot read"), "{e}");
+    assert!(
+        e.contains("missing.pth") && e.contains("cannot read"),
+        "{e}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -239,10 +291,17 @@ fn full_size_torchvision_state_dicts_fit() {
     let dev = Device::flex();
     for depth in [18, 34, 50, 101] {
         let m = MaskRcnnConfig::new(depth, 1).init(&dev);
-        let (_, note) =
-            load_init(Detector::MaskRcnn(m), &dir.join(format!("resnet{depth}.pth")), &dev).unwrap();
+        let (_, note) = load_init(
+            Detector::MaskRcnn(m),
+            &dir.join(format!("resnet{depth}.pth")),
+            &dev,
+        )
+        .unwrap();
         eprintln!("R{depth}: {note}");
-        assert!(note.contains("torchvision ResNet (backbone only)"), "{note}");
+        assert!(
+            note.contains("torchvision ResNet (backbone only)"),
+            "{note}"
+        );
     }
     let (_, note) = load_init(
         Detector::MaskRcnn(MaskRcnnConfig::paper(50, 1).init(&dev)),
@@ -259,5 +318,59 @@ fn full_size_torchvision_state_dicts_fit() {
     )
     .unwrap();
     eprintln!("{note}");
-    assert!(note.contains("6 tensors keep their fresh initialisation"), "{note}");
+    assert!(
+        note.contains("6 tensors keep their fresh initialisation"),
+        "{note}"
+    );
+}
+
+/// Corrupt files never panic: seeded byte flips in the zip headers, `data.pkl` and the
+/// central directory of the fixture, and truncations anywhere, give `Ok` or an error
+/// (the same for the safetensors fixture's header).
+#[test]
+fn corrupted_files_are_errors_not_panics() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(15);
+    for (file, safet) in [
+        ("maskrcnn_r50_w8.pth", false),
+        ("resnet18_w8.safetensors", true),
+    ] {
+        let good = std::fs::read(fixture(file)).unwrap();
+        let read = |b: &[u8]| {
+            if safet {
+                weights::safetensors::read(b).map(|_| ())
+            } else {
+                weights::pytorch::read(b).map(|_| ())
+            }
+        };
+        let mut errors = 0;
+        for i in 0..400 {
+            let mut b = good.clone();
+            if i % 4 == 0 {
+                b.truncate(rng.random_range(0..good.len()));
+            } else {
+                // Structure lives at both ends: headers and data.pkl first, the central
+                // directory (or, for safetensors, only the header) at the start or end.
+                let n = good.len();
+                for _ in 0..rng.random_range(1..8) {
+                    let at = if rng.random_bool(0.5) || safet {
+                        rng.random_range(0..8192.min(n))
+                    } else {
+                        rng.random_range(n.saturating_sub(8192)..n)
+                    };
+                    b[at] = rng.random();
+                }
+            }
+            let r = std::panic::catch_unwind(|| read(&b));
+            match r {
+                Ok(Err(_)) => errors += 1,
+                Ok(Ok(())) => {}
+                Err(_) => panic!("{file}: mutation {i} panicked"),
+            }
+        }
+        assert!(
+            errors > 100,
+            "{file}: only {errors} of 400 corruptions were noticed"
+        );
+    }
 }

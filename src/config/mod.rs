@@ -201,7 +201,11 @@ impl Config {
             bail!(
                 "train.freeze = {} must be at most {max_freeze} for model.kind = \"{}\" ({})",
                 self.train.freeze,
-                if self.model.kind() == ModelKind::Yolo { "yolo" } else { "maskrcnn" },
+                if self.model.kind() == ModelKind::Yolo {
+                    "yolo"
+                } else {
+                    "maskrcnn"
+                },
                 if self.model.kind() == ModelKind::Yolo {
                     "ultralytics layer indices 0..23; 23 is the head"
                 } else {

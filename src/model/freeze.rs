@@ -55,14 +55,20 @@ pub fn yolo_prefixes(n: usize) -> Result<Vec<String>> {
             LAYERS.len() - 1
         );
     }
-    Ok(LAYERS[..n].iter().flatten().map(|s| s.to_string()).collect())
+    Ok(LAYERS[..n]
+        .iter()
+        .flatten()
+        .map(|s| s.to_string())
+        .collect())
 }
 
 /// Module-path prefixes of the Mask R-CNN stem and the first `n − 1` ResNet stages
 /// (detectron2's `FREEZE_AT = n`).
 pub fn maskrcnn_prefixes(n: usize) -> Result<Vec<String>> {
     if n > 5 {
-        bail!("train.freeze = {n} must be at most 5 for a Mask R-CNN (the stem and 4 ResNet stages)");
+        bail!(
+            "train.freeze = {n} must be at most 5 for a Mask R-CNN (the stem and 4 ResNet stages)"
+        );
     }
     let mut p = Vec::new();
     if n >= 1 {
@@ -131,7 +137,10 @@ mod tests {
     #[test]
     fn stage_tables() {
         assert!(yolo_prefixes(0).unwrap().is_empty());
-        assert_eq!(yolo_prefixes(2).unwrap(), vec!["backbone.l0", "backbone.l1"]);
+        assert_eq!(
+            yolo_prefixes(2).unwrap(),
+            vec!["backbone.l0", "backbone.l1"]
+        );
         let b = yolo_prefixes(11).unwrap();
         assert_eq!(b.len(), 11);
         assert_eq!(b.last().unwrap(), "backbone.psa");

@@ -89,7 +89,8 @@ pub fn load_init(model: Detector, path: &Path, device: &Device) -> Result<(Detec
             }
             .with_context(|| origin.clone())?;
             let nc = m.num_classes();
-            let mapped = torchvision::map_state_dict(tensors, nc).with_context(|| origin.clone())?;
+            let mapped =
+                torchvision::map_state_dict(tensors, nc).with_context(|| origin.clone())?;
             if mapped.kind == torchvision::TorchvisionKind::ResNet {
                 fresh_why = "an ImageNet ResNet file holds the backbone only";
             }

@@ -15,9 +15,9 @@ use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header};
 use super::detector::{Detector, DetectorConfig};
 use super::ema::Ema;
 use super::init::load_init;
-use crate::model::freeze::freeze;
 use super::optim;
 use super::run_files::{self, EpochRecord};
+use crate::model::freeze::freeze;
 
 /// Weights, EMA and optimiser of a run, and how far it got.
 pub struct TrainState {

@@ -130,7 +130,13 @@ fn maskrcnn_key(k: &str) -> Option<(String, Op)> {
         return resnet_key(r).map(|o| (format!("backbone.{o}"), Op::Copy));
     }
     let p: Vec<&str> = k.split('.').collect();
-    let lin = |x: &str| if x == "weight" { Op::Transpose } else { Op::Copy };
+    let lin = |x: &str| {
+        if x == "weight" {
+            Op::Transpose
+        } else {
+            Op::Copy
+        }
+    };
     match p[..] {
         ["backbone", "fpn", blocks, i, "0", x] | ["backbone", "fpn", blocks, i, x]
             if (x == "weight" || x == "bias") =>
@@ -181,8 +187,21 @@ fn dropped(k: &str) -> bool {
     k.ends_with("num_batches_tracked") || k.starts_with("fc.")
 }
 
-/// Applies `op` to a tensor of shape `shape` (host f32 values).
-fn transform(op: Op, v: Vec<f32>, shape: &[usize]) -> (Vec<f32>, Vec<usize>) {
+/// Applies `op` to a tensor of shape `shape` (host f32 values) from a file with `k`
+/// classes (background included); `None` if the shape does not fit `op` and `k`.
+fn transform(op: Op, v: Vec<f32>, shape: &[usize], k: usize) -> Option<(Vec<f32>, Vec<usize>)> {
+    let fits = match (op, shape) {
+        (Op::Copy, _) => true,
+        (Op::Transpose, s) => s.len() == 2,
+        (Op::ClassLogits, s) => s.first() == Some(&k) && s.len() <= 2,
+        (Op::DropBackgroundBox, s) => s.first() == Some(&(4 * k)) && s.len() <= 2,
+        (Op::DropBackgroundMask, s) => s.first() == Some(&k) && (s.len() == 1 || s.len() == 4),
+    };
+    (fits && k >= 2 && v.len() == shape.iter().product::<usize>())
+        .then(|| transform_fitted(op, v, shape))
+}
+
+fn transform_fitted(op: Op, v: Vec<f32>, shape: &[usize]) -> (Vec<f32>, Vec<usize>) {
     let transpose = |v: &[f32], r: usize, c: usize| {
         let mut t = vec![0f32; v.len()];
         for i in 0..r {
@@ -239,13 +258,21 @@ pub fn map_state_dict(tensors: Vec<Snapshot>, num_classes: usize) -> Result<Mapp
             continue;
         }
         let mapped = match kind {
-            TorchvisionKind::ResNet => resnet_key(&t.name).map(|k| (format!("backbone.{k}"), Op::Copy)),
+            TorchvisionKind::ResNet => {
+                resnet_key(&t.name).map(|k| (format!("backbone.{k}"), Op::Copy))
+            }
             TorchvisionKind::MaskRcnn => maskrcnn_key(&t.name),
         };
         let Some((ours, op)) = mapped else {
-            bail!("torchvision key {} has no counterpart in chicktrain's Mask R-CNN", t.name);
+            bail!(
+                "torchvision key {} has no counterpart in chicktrain's Mask R-CNN",
+                t.name
+            );
         };
-        let class_op = matches!(op, Op::ClassLogits | Op::DropBackgroundBox | Op::DropBackgroundMask);
+        let class_op = matches!(
+            op,
+            Op::ClassLogits | Op::DropBackgroundBox | Op::DropBackgroundMask
+        );
         if class_op && !classes_fit {
             // Another class count: these keep their initialisation.
             continue;
@@ -260,7 +287,10 @@ pub fn map_state_dict(tensors: Vec<Snapshot>, num_classes: usize) -> Result<Mapp
             let v: Vec<f32> = snapshot_data(t)?
                 .try_to_vec::<f32>()
                 .map_err(|e| anyhow::anyhow!("tensor {name}: {e:?}"))?;
-            let (v, s) = transform(op, v, &shape);
+            let k = file_classes.unwrap_or(num_classes + 1);
+            let Some((v, s)) = transform(op, v, &shape, k) else {
+                bail!("torchvision key {name} has shape {shape:?}, which does not fit {k} classes");
+            };
             snapshot_f32(ours.clone(), v, s)
         };
         snapshots.push(snap);
@@ -281,12 +311,18 @@ mod tests {
     #[test]
     fn keys_map_both_ways_of_naming() {
         assert_eq!(resnet_key("conv1.weight").unwrap(), "stem.conv.weight");
-        assert_eq!(resnet_key("bn1.running_var").unwrap(), "stem.bn.running_var");
+        assert_eq!(
+            resnet_key("bn1.running_var").unwrap(),
+            "stem.bn.running_var"
+        );
         assert_eq!(
             resnet_key("layer3.5.conv2.weight").unwrap(),
             "stages.2.blocks.5.convs.1.conv.weight"
         );
-        assert_eq!(resnet_key("layer1.0.bn3.bias").unwrap(), "stages.0.blocks.0.convs.2.bn.beta");
+        assert_eq!(
+            resnet_key("layer1.0.bn3.bias").unwrap(),
+            "stages.0.blocks.0.convs.2.bn.beta"
+        );
         assert_eq!(
             resnet_key("layer2.0.downsample.1.weight").unwrap(),
             "stages.1.blocks.0.down.bn.gamma"
@@ -294,14 +330,20 @@ mod tests {
         assert_eq!(resnet_key("layer5.0.conv1.weight"), None);
         assert_eq!(resnet_key("layer1.0.conv4.weight"), None);
         for (k, o) in [
-            ("backbone.fpn.inner_blocks.2.0.weight", "fpn.lateral.2.weight"),
+            (
+                "backbone.fpn.inner_blocks.2.0.weight",
+                "fpn.lateral.2.weight",
+            ),
             ("backbone.fpn.inner_blocks.2.bias", "fpn.lateral.2.bias"),
             ("backbone.fpn.layer_blocks.0.0.bias", "fpn.output.0.bias"),
             ("rpn.head.conv.0.0.weight", "rpn.conv.weight"),
             ("rpn.head.conv.bias", "rpn.conv.bias"),
             ("roi_heads.box_head.fc7.weight", "box_head.fcs.1.weight"),
             ("roi_heads.mask_head.3.0.weight", "mask_head.convs.3.weight"),
-            ("roi_heads.mask_head.mask_fcn1.bias", "mask_head.convs.0.bias"),
+            (
+                "roi_heads.mask_head.mask_fcn1.bias",
+                "mask_head.convs.0.bias",
+            ),
         ] {
             assert_eq!(maskrcnn_key(k).unwrap().0, o, "{k}");
         }
@@ -310,18 +352,46 @@ mod tests {
     #[test]
     fn background_moves_last_and_unknown_keys_are_named() {
         // cls_score.bias of K = 3 (bg, a, b) → (a, b, bg); bbox_pred.bias drops bg's 4.
-        assert_eq!(transform(Op::ClassLogits, vec![9.0, 1.0, 2.0], &[3]).0, vec![1.0, 2.0, 9.0]);
-        let (w, s) = transform(Op::ClassLogits, vec![9.0, 9.5, 1.0, 1.5, 2.0, 2.5], &[3, 2]);
+        assert_eq!(
+            transform(Op::ClassLogits, vec![9.0, 1.0, 2.0], &[3], 3)
+                .unwrap()
+                .0,
+            vec![1.0, 2.0, 9.0]
+        );
+        let (w, s) = transform(
+            Op::ClassLogits,
+            vec![9.0, 9.5, 1.0, 1.5, 2.0, 2.5],
+            &[3, 2],
+            3,
+        )
+        .unwrap();
         assert_eq!(s, vec![2, 3]);
         assert_eq!(w, vec![1.0, 2.0, 9.0, 1.5, 2.5, 9.5]);
         let b: Vec<f32> = (0..8).map(|x| x as f32).collect();
-        assert_eq!(transform(Op::DropBackgroundBox, b, &[8]).0, vec![4.0, 5.0, 6.0, 7.0]);
-        let e = map_state_dict(vec![snapshot_f32("conv1.weight", vec![0.0], vec![1]), snapshot_f32("layer1.0.weird.weight", vec![0.0], vec![1])], 1)
+        assert_eq!(
+            transform(Op::DropBackgroundBox, b.clone(), &[8], 2)
+                .unwrap()
+                .0,
+            vec![4.0, 5.0, 6.0, 7.0]
+        );
+        // A box predictor that does not hold 4 per class is refused, not sliced.
+        assert!(transform(Op::DropBackgroundBox, b, &[8], 3).is_none());
+        assert!(transform(Op::DropBackgroundBox, vec![0.0; 2], &[2], 2).is_none());
+        let e = map_state_dict(
+            vec![
+                snapshot_f32("conv1.weight", vec![0.0], vec![1]),
+                snapshot_f32("layer1.0.weird.weight", vec![0.0], vec![1]),
+            ],
+            1,
+        )
+        .err()
+        .unwrap()
+        .to_string();
+        assert!(e.contains("layer1.0.weird.weight"), "{e}");
+        let e = map_state_dict(vec![snapshot_f32("foo", vec![0.0], vec![1])], 1)
             .err()
             .unwrap()
             .to_string();
-        assert!(e.contains("layer1.0.weird.weight"), "{e}");
-        let e = map_state_dict(vec![snapshot_f32("foo", vec![0.0], vec![1])], 1).err().unwrap().to_string();
         assert!(e.contains("first key foo"), "{e}");
     }
 }

@@ -109,8 +109,13 @@ pub fn collect<M: Module>(module: &M) -> Vec<Snapshot> {
         }
         fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
             let (bytes, shape, dtype) = p.val().into_data().into_parts();
-            self.out
-                .push(Snapshot::new(self.path.join("."), dtype, shape, None, bytes));
+            self.out.push(Snapshot::new(
+                self.path.join("."),
+                dtype,
+                shape,
+                None,
+                bytes,
+            ));
         }
     }
     let mut c = C {
@@ -135,7 +140,8 @@ pub fn shapes<M: Module>(module: &M) -> Vec<(String, Vec<usize>)> {
             self.path.pop();
         }
         fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            self.out.push((self.path.join("."), p.lazy_shape().to_vec()));
+            self.out
+                .push((self.path.join("."), p.lazy_shape().to_vec()));
         }
     }
     let mut s = S {
@@ -298,37 +304,81 @@ mod tests {
         let a = tiny(1);
         let b = tiny(1);
         let snaps = collect(&a);
-        assert!(snaps.iter().any(|s| s.name == "backbone.l0.conv.weight"), "{:?}", snaps[0].name);
+        assert!(
+            snaps.iter().any(|s| s.name == "backbone.l0.conv.weight"),
+            "{:?}",
+            snaps[0].name
+        );
         assert!(snaps.iter().any(|s| s.name.ends_with("bn.running_var")));
         let n = snaps.len();
         let (b, r) = apply(b, snaps, &|_| false, "a").unwrap();
-        assert_eq!(r, Applied { loaded: n, reinitialised: vec![] });
-        let va: Vec<Vec<f32>> = collect(&a).into_iter().map(|s| snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap()).collect();
-        let vb: Vec<Vec<f32>> = collect(&b).into_iter().map(|s| snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap()).collect();
+        assert_eq!(
+            r,
+            Applied {
+                loaded: n,
+                reinitialised: vec![]
+            }
+        );
+        let va: Vec<Vec<f32>> = collect(&a)
+            .into_iter()
+            .map(|s| snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap())
+            .collect();
+        let vb: Vec<Vec<f32>> = collect(&b)
+            .into_iter()
+            .map(|s| snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap())
+            .collect();
         assert_eq!(va, vb);
     }
 
     #[test]
     fn mismatches_name_the_first_key_and_class_tensors_are_reinitialised() {
-        let (_, r) = apply(tiny(3), collect(&tiny(1)), &|p| p.starts_with("head.cls."), "one.bpk").unwrap();
+        let (_, r) = apply(
+            tiny(3),
+            collect(&tiny(1)),
+            &|p| p.starts_with("head.cls."),
+            "one.bpk",
+        )
+        .unwrap();
         assert!(!r.reinitialised.is_empty());
-        assert!(r.reinitialised.iter().all(|p| p.starts_with("head.cls.")), "{:?}", r.reinitialised);
+        assert!(
+            r.reinitialised.iter().all(|p| p.starts_with("head.cls.")),
+            "{:?}",
+            r.reinitialised
+        );
         assert!(r.reinitialised.iter().any(|p| p.ends_with("out.weight")));
-        let e = format!("{:#}", apply(tiny(3), collect(&tiny(1)), &|_| false, "one.bpk").unwrap_err());
-        assert!(e.contains("one.bpk") && e.contains("head.cls.") && e.contains("expects shape"), "{e}");
+        let e = format!(
+            "{:#}",
+            apply(tiny(3), collect(&tiny(1)), &|_| false, "one.bpk").unwrap_err()
+        );
+        assert!(
+            e.contains("one.bpk") && e.contains("head.cls.") && e.contains("expects shape"),
+            "{e}"
+        );
         let wide = YoloSegConfig::new(Scale::N, 1)
             .with_input_size(32)
             .with_width_mult(0.5)
             .with_num_masks(4)
             .init(&Device::flex());
-        let e = format!("{:#}", apply(tiny(1), collect(&wide), &|_| false, "w.bpk").unwrap_err());
+        let e = format!(
+            "{:#}",
+            apply(tiny(1), collect(&wide), &|_| false, "w.bpk").unwrap_err()
+        );
         // The first key in the model's order whose shape differs, expected and found.
-        assert!(e.contains("w.bpk: key backbone.l1.conv.weight does not fit"), "{e}");
-        assert!(e.contains("expects shape [8, 8, 3, 3], the file has [16, 8, 3, 3]"), "{e}");
+        assert!(
+            e.contains("w.bpk: key backbone.l1.conv.weight does not fit"),
+            "{e}"
+        );
+        assert!(
+            e.contains("expects shape [8, 8, 3, 3], the file has [16, 8, 3, 3]"),
+            "{e}"
+        );
         let mut snaps = collect(&tiny(1));
         snaps.retain(|s| s.name != "backbone.l1.bn.gamma");
         let e = format!("{:#}", apply(tiny(1), snaps, &|_| false, "m").unwrap_err());
-        assert!(e.contains("key backbone.l1.bn.gamma") && e.contains("missing"), "{e}");
+        assert!(
+            e.contains("key backbone.l1.bn.gamma") && e.contains("missing"),
+            "{e}"
+        );
         let mut snaps = collect(&tiny(1));
         snaps.push(snapshot_f32("extra.weight", vec![0.0], vec![1]));
         let e = format!("{:#}", apply(tiny(1), snaps, &|_| false, "x").unwrap_err());

@@ -118,7 +118,10 @@ fn long(bytes: &[u8]) -> Result<i64> {
         return Ok(0);
     }
     if bytes.len() > 8 {
-        bail!("pickle: integer of {} bytes does not fit in 64 bits", bytes.len());
+        bail!(
+            "pickle: integer of {} bytes does not fit in 64 bits",
+            bytes.len()
+        );
     }
     let neg = bytes[bytes.len() - 1] & 0x80 != 0;
     let mut b = [if neg { 0xff } else { 0 }; 8];

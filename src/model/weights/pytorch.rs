@@ -101,7 +101,9 @@ fn zip_entries(b: &[u8]) -> Result<Vec<Entry>> {
         let end = start
             .checked_add(csize as usize)
             .filter(|&x| x <= b.len())
-            .with_context(|| format!("zip entry {name} runs past the end of the file (truncated?)"))?;
+            .with_context(|| {
+                format!("zip entry {name} runs past the end of the file (truncated?)")
+            })?;
         out.push(Entry {
             name,
             data: start..end,
@@ -163,7 +165,9 @@ impl Archive<'_> {
         };
         let f = f.global_name().unwrap_or_default();
         let args = args.as_seq().unwrap_or(&[]);
-        if f == "torch._utils._rebuild_parameter" || f == "torch._utils._rebuild_parameter_with_state" {
+        if f == "torch._utils._rebuild_parameter"
+            || f == "torch._utils._rebuild_parameter_with_state"
+        {
             return match args.first() {
                 Some(d) => self.tensor(name, d),
                 None => bail!("tensor {name}: empty _rebuild_parameter"),
@@ -179,7 +183,9 @@ impl Archive<'_> {
         let Value::PersId(pid) = storage else {
             return Err(bad("storage is not a persistent id"));
         };
-        let pid = pid.as_seq().ok_or_else(|| bad("storage id is not a tuple"))?;
+        let pid = pid
+            .as_seq()
+            .ok_or_else(|| bad("storage id is not a tuple"))?;
         let (Some(ty), Some(key)) = (pid.get(1), pid.get(2).and_then(|k| k.as_str())) else {
             return Err(bad("storage id lacks a type or key"));
         };
@@ -190,7 +196,9 @@ impl Archive<'_> {
         let dtype = storage_dtype(&ty_name)
             .ok_or_else(|| bad(&format!("unsupported storage type {ty_name}")))?;
         let esize = dtype.size();
-        let offset = offset.as_int().ok_or_else(|| bad("offset is not an integer"))? as usize;
+        let offset = offset
+            .as_int()
+            .ok_or_else(|| bad("offset is not an integer"))? as usize;
         let ints = |v: &Value, what: &str| -> Result<Vec<usize>> {
             v.as_seq()
                 .ok_or_else(|| bad(&format!("{what} is not a tuple")))?
@@ -209,7 +217,13 @@ impl Archive<'_> {
             return Err(bad("size and stride differ in length"));
         }
         let raw = self.storage(key)?;
-        let numel: usize = shape.iter().product();
+        // Checked: sizes come from the file, and a corrupt one must be an error, not a
+        // wrapped product that passes the bounds check.
+        let too_big = || bad("size overflows (corrupt file?)");
+        let numel = shape
+            .iter()
+            .try_fold(1usize, |a, &n| a.checked_mul(n))
+            .ok_or_else(too_big)?;
         // Row-major gather (a contiguous tensor is one slice).
         let mut contiguous = vec![0usize; shape.len()];
         let mut acc = 1;
@@ -220,17 +234,24 @@ impl Archive<'_> {
         let span = if numel == 0 {
             0
         } else {
-            1 + shape
+            shape
                 .iter()
                 .zip(&stride)
-                .map(|(&n, &s)| (n - 1) * s)
-                .sum::<usize>()
+                .try_fold(1usize, |a, (&n, &s)| a.checked_add((n - 1).checked_mul(s)?))
+                .ok_or_else(too_big)?
         };
-        if (offset + span) * esize > raw.len() {
+        let need = offset
+            .checked_add(if stride == contiguous || numel <= 1 {
+                numel
+            } else {
+                span
+            })
+            .and_then(|e| e.checked_mul(esize))
+            .ok_or_else(too_big)?;
+        if need > raw.len() {
             return Err(bad(&format!(
-                "storage {key} holds {} bytes, the tensor needs {} (truncated file?)",
-                raw.len(),
-                (offset + span) * esize
+                "storage {key} holds {} bytes, the tensor needs {need} (truncated file?)",
+                raw.len()
             )));
         }
         let bytes = if stride == contiguous || numel <= 1 {
@@ -253,7 +274,13 @@ impl Archive<'_> {
         };
         let data = TensorData::from_bytes_vec(bytes, shape, dtype);
         let (bytes, shape, dtype) = data.into_parts();
-        Ok(Some(Snapshot::new(name.to_string(), dtype, shape, None, bytes)))
+        Ok(Some(Snapshot::new(
+            name.to_string(),
+            dtype,
+            shape,
+            None,
+            bytes,
+        )))
     }
 }
 
@@ -282,10 +309,16 @@ pub fn read(bytes: &[u8]) -> Result<Vec<Snapshot>> {
         .find(|e| e.name.ends_with("data.pkl") && e.name.matches('/').count() <= 1)
         .context("no data.pkl in the archive (not a torch.save file)")?;
     let prefix = pkl.name[..pkl.name.len() - "data.pkl".len()].to_string();
-    if let Some(bo) = entries.iter().find(|e| e.name == format!("{prefix}byteorder")) {
+    if let Some(bo) = entries
+        .iter()
+        .find(|e| e.name == format!("{prefix}byteorder"))
+    {
         let order = &bytes[bo.data.clone()];
         if order != b"little" {
-            bail!("byte order {:?} is not supported (only little-endian)", String::from_utf8_lossy(order));
+            bail!(
+                "byte order {:?} is not supported (only little-endian)",
+                String::from_utf8_lossy(order)
+            );
         }
     }
     let root = pickle::load(&bytes[pkl.data.clone()]).context("cannot unpickle data.pkl")?;
@@ -294,7 +327,8 @@ pub fn read(bytes: &[u8]) -> Result<Vec<Snapshot>> {
         entries,
         prefix,
     };
-    let top = dict_entries(&root).context("data.pkl does not hold a dict (expected a state_dict)")?;
+    let top =
+        dict_entries(&root).context("data.pkl does not hold a dict (expected a state_dict)")?;
     if let Some(sd) = state_dict(&a, top)? {
         return Ok(sd);
     }

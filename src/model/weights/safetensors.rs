@@ -65,7 +65,10 @@ pub fn read(bytes: &[u8]) -> Result<Vec<Snapshot>> {
         let [a, b] = off[..] else {
             return Err(bad("data_offsets must be [begin, end]"));
         };
-        let want = shape.iter().product::<usize>() * dt.size();
+        let want = shape
+            .iter()
+            .try_fold(dt.size(), |a, &n| a.checked_mul(n))
+            .ok_or_else(|| bad("shape overflows"))?;
         if b < a || b - a != want {
             return Err(bad(&format!(
                 "data_offsets {a}..{b} do not hold {want} bytes of shape {shape:?}"
@@ -76,7 +79,13 @@ pub fn read(bytes: &[u8]) -> Result<Vec<Snapshot>> {
             .ok_or_else(|| bad("data runs past the end of the file (truncated?)"))?;
         out.push((
             a,
-            Snapshot::new(name.clone(), dt, shape, None, burn::tensor::Bytes::from_bytes_vec(raw.to_vec())),
+            Snapshot::new(
+                name.clone(),
+                dt,
+                shape,
+                None,
+                burn::tensor::Bytes::from_bytes_vec(raw.to_vec()),
+            ),
         ));
     }
     if out.is_empty() {
@@ -119,7 +128,10 @@ mod tests {
             ("a.weight".into(), vec![2, 2], vec![1.0, 2.0, 3.0, 4.0]),
             ("b".into(), vec![1], vec![5.0]),
         ]);
-        assert_eq!(super::super::sniff(&b), Some(super::super::Format::Safetensors));
+        assert_eq!(
+            super::super::sniff(&b),
+            Some(super::super::Format::Safetensors)
+        );
         let t = read(&b).unwrap();
         assert_eq!(t.len(), 2);
         assert_eq!(t[0].name, "a.weight");
