@@ -310,6 +310,13 @@ mod tests {
             snaps[0].name
         );
         assert!(snaps.iter().any(|s| s.name.ends_with("bn.running_var")));
+        // Enum variants are path segments, as in burn-store's `collect(None, None, false)`:
+        // the names an importer must produce.
+        assert!(
+            snaps.iter().any(|s| s.name.starts_with("backbone.l2.m.0.Bottleneck.")),
+            "{:?}",
+            snaps.iter().map(|s| &s.name).collect::<Vec<_>>()
+        );
         let n = snaps.len();
         let (b, r) = apply(b, snaps, &|_| false, "a").unwrap();
         assert_eq!(
