@@ -4,7 +4,9 @@
 //! running statistics) are bit-identical to the start after training steps, in the raw
 //! weights and in the EMA, also across `--resume`, while the rest trains; a model with
 //! another class count re-initialises exactly the class branch and says so; another family,
-//! a PyTorch file for YOLO and a garbage file are clean errors naming the file.
+//! a PyTorch file for YOLO and a garbage file are clean errors naming the file. For Mask
+//! R-CNN, `train.freeze = 2` keeps the stem and res2 across an epoch and `--resume`, and a
+//! torchvision file given through the config ends up, frozen, exactly in those stages.
 
 mod common;
 
@@ -195,5 +197,71 @@ fn maskrcnn_freeze_at_2_keeps_stem_and_res2() {
     assert!(m1
         .keys()
         .any(|k| frozen(k) && k.ends_with("bn.running_var")));
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// The user path for torchvision weights, through the config: `--set model.init=X.pth`
+/// with `train.freeze = 2` on a Mask R-CNN shaped like the fixture (paper preset at width
+/// ×0.125, 16-wide FPN): after an epoch the frozen stem and res2 hold exactly the file's
+/// values (fp16 widened to f32, BatchNorm statistics included), everything else loaded
+/// from it has trained away from them.
+#[test]
+fn torchvision_weights_through_the_config_and_frozen_stages_keep_them() {
+    use chicktrain::model::maskrcnn::torchvision::map_state_dict;
+    use chicktrain::model::weights::pytorch;
+    let d = tmp("tv-config");
+    let pth = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/torchvision/maskrcnn_r50_w8.pth");
+    let init = format!("model.init=\"{}\"", pth.display());
+    let sets = [
+        init.as_str(),
+        "train.freeze=2",
+        "data.image_size=64",
+        "data.crop=64",
+        "data.real.count=9",
+        "data.real.limit=9",
+        "data.synthetic=4",
+        "train.epochs=1",
+        "train.batch=4",
+        "train.warmup_iters=2",
+        "model.preset=\"paper\"",
+        "model.width_mult=0.125",
+        "model.fpn_channels=16",
+        "model.box_fc_dim=32",
+        "model.mask_conv_dim=16",
+    ];
+    let opts = TrainOptions {
+        run_dir: Some(d.join("run")),
+        quiet: true,
+        ..Default::default()
+    };
+    train(shipped("maskrcnn_r50_syn250", &d, &sets), &opts).unwrap();
+    let file: HashMap<String, Vec<f32>> =
+        map_state_dict(pytorch::read(&std::fs::read(&pth).unwrap()).unwrap(), 1)
+            .unwrap()
+            .snapshots
+            .into_iter()
+            .map(|s| {
+                (
+                    s.name.clone(),
+                    snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap(),
+                )
+            })
+            .collect();
+    let trained = tensors(&d.join("run/last.bpk"), "model");
+    let frozen = |k: &str| k.starts_with("backbone.stem.") || k.starts_with("backbone.stages.0.");
+    let (mut same, mut moved) = (0, 0);
+    for (k, v) in &file {
+        if frozen(k) {
+            assert!(v == &trained[k], "{k}: frozen, yet not the file's value");
+            same += 1;
+        } else if v != &trained[k] {
+            moved += 1;
+        }
+    }
+    assert!(
+        same > 40 && moved > 100,
+        "{same} frozen kept, {moved} trained"
+    );
     std::fs::remove_dir_all(&d).unwrap();
 }
