@@ -193,24 +193,18 @@ impl Config {
         self.data.validate()?;
         self.train.validate()?;
         self.model.validate(self.data.crop)?;
-        let max_freeze = match self.model.kind() {
-            ModelKind::Yolo => 23,
-            ModelKind::Maskrcnn => 5,
+        let (kind, max_freeze, stages) = match self.model.kind() {
+            ModelKind::Yolo => ("yolo", 23, "ultralytics layer indices; 23 is the head"),
+            ModelKind::Maskrcnn => (
+                "maskrcnn",
+                5,
+                "1 = stem, 2–5 = stem and the first 1–4 ResNet stages",
+            ),
         };
         if self.train.freeze > max_freeze {
             bail!(
-                "train.freeze = {} must be at most {max_freeze} for model.kind = \"{}\" ({})",
-                self.train.freeze,
-                if self.model.kind() == ModelKind::Yolo {
-                    "yolo"
-                } else {
-                    "maskrcnn"
-                },
-                if self.model.kind() == ModelKind::Yolo {
-                    "ultralytics layer indices 0..23; 23 is the head"
-                } else {
-                    "1 = stem, 2–5 = stem and the first 1–4 ResNet stages"
-                }
+                "train.freeze = {} must be at most {max_freeze} for model.kind = \"{kind}\" ({stages})",
+                self.train.freeze
             );
         }
         Ok(())
@@ -325,6 +319,17 @@ mod tests {
                 vec!["model.kind=\"mlp\"".into()],
                 "unknown variant `mlp`",
             ),
+            (yolo, vec!["model.init=\"\"".into()], "model.init is empty"),
+            (
+                &mrcnn,
+                vec!["train.freeze=6".into()],
+                "train.freeze = 6 must be at most 5 for model.kind = \"maskrcnn\"",
+            ),
+            (
+                yolo,
+                vec!["train.freeze=24".into()],
+                "train.freeze = 24 must be at most 23",
+            ),
         ];
         for (text, ov, needle) in cases {
             let err = format!("{:#}", parse(text, "test.toml", &ov).unwrap_err());
@@ -339,6 +344,17 @@ mod tests {
         let back = parse(&toml::to_string(&cfg).unwrap(), "resolved", &[]).unwrap();
         assert_eq!(back.model, cfg.model);
         assert_eq!(back.train.warmup_iters, 500);
+        // `model.init` and `train.freeze` belong to both families and survive the round trip.
+        for text in [yolo, mrcnn.as_str()] {
+            let ov = ["model.init=runs/x/best.bpk".into(), "train.freeze=2".into()];
+            let c = parse(text, "i", &ov).unwrap();
+            assert_eq!(c.model.init(), Some("runs/x/best.bpk"));
+            let back = parse(&toml::to_string(&c).unwrap(), "resolved", &[]).unwrap();
+            assert_eq!(
+                (back.model.init(), back.train.freeze),
+                (Some("runs/x/best.bpk"), 2)
+            );
+        }
         let y = parse(yolo, "q", &[]).unwrap();
         let ModelConfig::Yolo(m) = &y.model else {
             panic!("not a YOLO: {:?}", y.model)
