@@ -110,7 +110,10 @@ fn reads_state_dicts_modules_and_safetensors_as_torch_wrote_them() {
         let exp = j[file].as_object().unwrap();
         let got: Vec<&String> = sd.tensors.keys().collect();
         let want: Vec<&String> = exp.keys().collect();
-        assert_eq!(got, want, "{file}: names (the non-persistent buffer is left out)");
+        assert_eq!(
+            got, want,
+            "{file}: names (the non-persistent buffer is left out)"
+        );
         for (k, e) in exp {
             let (shape, values, dtype) = expected_tensor(e);
             let t = &sd.tensors[k];
@@ -122,7 +125,11 @@ fn reads_state_dicts_modules_and_safetensors_as_torch_wrote_them() {
             };
             // f16 / f32 values are exact in f32; the JSON holds their f64 expansion.
             let v32: Vec<f32> = values.iter().map(|&x| x as f32).collect();
-            assert_eq!(v.iter().map(|&x| x as f32).collect::<Vec<_>>(), v32, "{file} {k}");
+            assert_eq!(
+                v.iter().map(|&x| x as f32).collect::<Vec<_>>(),
+                v32,
+                "{file} {k}"
+            );
         }
     }
 }
@@ -133,14 +140,21 @@ fn forward_reference() -> BTreeMap<String, HostTensor> {
 
 fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
 }
 
 #[test]
 fn ultralytics_checkpoint_gives_ultralytics_outputs() {
     let cfg = tiny_cfg(2);
     let w = read_ultralytics(&fixture("tiny_seg.pt"), &cfg).unwrap();
-    assert!(w.class_unfit.is_empty() && w.missing.is_empty(), "{:?}", w.notes);
+    assert!(
+        w.class_unfit.is_empty() && w.missing.is_empty(),
+        "{:?}",
+        w.notes
+    );
     assert_eq!(w.file_classes, 2);
     assert!(w.notes[0].contains("from the ema of"), "{:?}", w.notes);
     assert!(w.notes[0].contains("float16"), "{:?}", w.notes);
@@ -182,7 +196,9 @@ fn safetensors_export_reads_back_bit_for_bit() {
     let orig = read_state_dict(&file, &["ema", "model"]).unwrap().tensors;
     assert_eq!(sd.len(), orig.len());
     for (k, t) in &sd {
-        let o = orig.get(k).unwrap_or_else(|| panic!("{k} not in the checkpoint"));
+        let o = orig
+            .get(k)
+            .unwrap_or_else(|| panic!("{k} not in the checkpoint"));
         assert_eq!(t.shape, o.shape, "{k}");
         if k.ends_with("num_batches_tracked") {
             assert_eq!(t.data, HostData::I64(vec![0]));
@@ -222,14 +238,21 @@ fn another_class_count_leaves_the_class_head_out() {
         .class_unfit
         .iter()
         .all(|u| u.theirs.starts_with("model.23.cv3.") && u.theirs.contains(".2.")));
-    assert!(w.notes.iter().any(|n| n.contains("2 classes, the model 1")), "{:?}", w.notes);
+    assert!(
+        w.notes.iter().any(|n| n.contains("2 classes, the model 1")),
+        "{:?}",
+        w.notes
+    );
     let full = read_ultralytics(&file, &tiny_cfg(2)).unwrap();
     assert_eq!(w.snapshots.len() + 6, full.snapshots.len());
     // nc 80 widens the class branch too (c3 = max(ch, min(nc, 100))): all of it is left out,
     // nothing else.
     let w80 = read_ultralytics(&file, &tiny_cfg(80)).unwrap();
     assert!(w80.class_unfit.len() > 6);
-    assert!(w80.class_unfit.iter().all(|u| u.theirs.starts_with("model.23.cv3.")));
+    assert!(w80
+        .class_unfit
+        .iter()
+        .all(|u| u.theirs.starts_with("model.23.cv3.")));
     assert!(apply_all(tiny_cfg(80).init(&Device::flex()), &w80)
         .unwrap_err()
         .to_string()
@@ -256,7 +279,8 @@ fn a_detection_checkpoint_leaves_the_mask_head_out() {
 fn bad_files_are_refused_by_name() {
     let cfg = tiny_cfg(2);
     let dir = tmp("bad");
-    let err = |p: &Path, cfg: &YoloSegConfig| format!("{:#}", read_ultralytics(p, cfg).unwrap_err());
+    let err =
+        |p: &Path, cfg: &YoloSegConfig| format!("{:#}", read_ultralytics(p, cfg).unwrap_err());
 
     let bytes = std::fs::read(fixture("tiny_seg.pt")).unwrap();
     let cut = dir.join("truncated.pt");
@@ -282,9 +306,144 @@ fn bad_files_are_refused_by_name() {
     let cut = dir.join("cut.safetensors");
     std::fs::write(&cut, &st[..st.len() - 10]).unwrap();
     let e = format!("{:#}", read_state_dict(&cut, &[]).unwrap_err());
-    assert!(e.contains("cut.safetensors") && e.contains("truncated"), "{e}");
+    assert!(
+        e.contains("cut.safetensors") && e.contains("truncated"),
+        "{e}"
+    );
 
     let e = err(&dir.join("absent.pt"), &cfg);
     assert!(e.contains("absent.pt does not exist"), "{e}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+mod common;
+
+/// A checkpoint whose `ema` weights are the fixture's (header as `train` writes it).
+fn checkpoint_of(
+    model: chicktrain::train::detector::Detector,
+    cfg: chicktrain::train::detector::DetectorConfig,
+    path: &Path,
+) {
+    use chicktrain::annotations::split::Split;
+    use chicktrain::train::checkpoint::{module_bytes, Checkpoint, Header, FORMAT};
+    let config = chicktrain::config::parse(chicktrain::config::SHIPPED[0].1, "q", &[]).unwrap();
+    let nc = cfg.num_classes();
+    Checkpoint {
+        header: Header {
+            format: FORMAT,
+            chicktrain: "test".into(),
+            model: cfg,
+            category_ids: (1..=nc as u64).collect(),
+            class_names: ["carcass", "wing"]
+                .iter()
+                .take(nc)
+                .map(|s| s.to_string())
+                .collect(),
+            config,
+            split: Split::new(&[1, 2, 3], [0.34, 0.33], 0).unwrap(),
+            proxy: true,
+            epoch: 3,
+            ema_updates: 9,
+            best_fitness: 0.5,
+            val: None,
+        },
+        sections: vec![("ema".into(), module_bytes(&model).unwrap())],
+    }
+    .save(path)
+    .unwrap();
+}
+
+#[test]
+fn export_command_writes_the_ultralytics_state_dict() {
+    use chicktrain::train::detector::{Detector, DetectorConfig};
+    let cfg = tiny_cfg(2);
+    let file = fixture("tiny_seg.pt");
+    let model = apply_all(
+        cfg.init(&Device::flex()),
+        &read_ultralytics(&file, &cfg).unwrap(),
+    )
+    .unwrap();
+    let dir = common::tmp("ultra-export");
+    let ckpt = dir.join("best.bpk");
+    checkpoint_of(
+        Detector::Yolo(model),
+        DetectorConfig::Yolo(cfg.clone()),
+        &ckpt,
+    );
+
+    let out = common::run(&[
+        "export",
+        "--checkpoint",
+        ckpt.to_str().unwrap(),
+        "--format",
+        "safetensors",
+    ]);
+    common::assert_success(&out);
+    let st = dir.join("best.safetensors");
+    assert!(String::from_utf8_lossy(&out.stdout).contains("best.safetensors"));
+    let (tensors, meta) = safetensors::parse(&std::fs::read(&st).unwrap()).unwrap();
+    assert_eq!(meta["ultralytics_scale"], "[0.5,0.125,1024]");
+    assert_eq!((meta["nc"].as_str(), meta["nm"].as_str()), ("2", "32"));
+    assert_eq!(meta["names"], r#"{"0":"carcass","1":"wing"}"#);
+    // Bit for bit the checkpoint's tensors, under ultralytics' names (fp16-exact values).
+    let orig = read_state_dict(&file, &["ema", "model"]).unwrap().tensors;
+    assert_eq!(tensors.len(), orig.len());
+    for (k, t) in &tensors {
+        if !k.ends_with("num_batches_tracked") {
+            assert_eq!(t.data, orig[k].data, "{k}");
+        }
+    }
+
+    // ONNX is another branch's; Mask R-CNN has no safetensors export here; neither leaves a file.
+    let onnx = dir.join("m.onnx");
+    let out = common::run(&[
+        "export",
+        "--checkpoint",
+        ckpt.to_str().unwrap(),
+        "--format",
+        "onnx",
+        "--out",
+        onnx.to_str().unwrap(),
+    ]);
+    common::assert_clean_error(&out, &["ONNX export is not built in this branch"]);
+    assert!(!onnx.exists());
+    let mr = common::tiny::tiny_maskrcnn(
+        64,
+        common::tiny::TinyWidths {
+            fpn: 16,
+            fc: 32,
+            mask_conv: 16,
+            mask_convs: 1,
+        },
+    );
+    let mr_ckpt = dir.join("mrcnn.bpk");
+    checkpoint_of(
+        Detector::MaskRcnn(mr.init(&Device::flex())),
+        DetectorConfig::Maskrcnn(mr),
+        &mr_ckpt,
+    );
+    let out = common::run(&[
+        "export",
+        "--checkpoint",
+        mr_ckpt.to_str().unwrap(),
+        "--format",
+        "safetensors",
+    ]);
+    common::assert_clean_error(
+        &out,
+        &["mrcnn.bpk", "Mask R-CNN", "not built in this branch"],
+    );
+    assert!(!dir.join("mrcnn.safetensors").exists());
+    let out = common::run(&[
+        "export",
+        "--checkpoint",
+        file.to_str().unwrap(),
+        "--format",
+        "safetensors",
+        "--out",
+        dir.join("x.safetensors").to_str().unwrap(),
+    ]);
+    common::assert_clean_error(&out, &["tiny_seg.pt is not a chicktrain checkpoint"]);
+    assert!(!dir.join("x.safetensors").exists());
     std::fs::remove_dir_all(dir).unwrap();
 }

@@ -211,7 +211,10 @@ fn dict_key(v: &Value) -> Result<String> {
     match v {
         Value::Str(s) => Ok(s.to_string()),
         Value::Int(i) => Ok(i.to_string()),
-        other => bail!("dict key of type {} where a name was expected", other.type_name()),
+        other => bail!(
+            "dict key of type {} where a name was expected",
+            other.type_name()
+        ),
     }
 }
 
@@ -337,7 +340,9 @@ impl PtFile {
             .filter(|n| *n == "data.pkl" || n.ends_with("/data.pkl"))
             .min_by_key(|n| n.len())
             .map(str::to_string)
-            .with_context(|| format!("{shown}: the zip archive has no data.pkl (not a torch.save file)"))?;
+            .with_context(|| {
+                format!("{shown}: the zip archive has no data.pkl (not a torch.save file)")
+            })?;
         let prefix = pkl[..pkl.len() - "data.pkl".len()].to_string();
         let bytes = {
             let mut e = archive
@@ -371,7 +376,10 @@ impl PtFile {
         {
             let mut ar = self.archive.borrow_mut();
             let mut e = ar.by_name(&entry).map_err(|e| {
-                anyhow!("{}: tensor {name}: cannot read archive entry {entry}: {e}", self.path)
+                anyhow!(
+                    "{}: tensor {name}: cannot read archive entry {entry}: {e}",
+                    self.path
+                )
             })?;
             if (e.size() as usize) < need {
                 bail!(
@@ -382,12 +390,20 @@ impl PtFile {
             }
             bytes.reserve(need);
             e.read_to_end(&mut bytes).with_context(|| {
-                format!("{}: tensor {name}: cannot read {entry} (truncated?)", self.path)
+                format!(
+                    "{}: tensor {name}: cannot read {entry} (truncated?)",
+                    self.path
+                )
             })?;
         }
         let numel: usize = t.shape.iter().product();
         if t.shape.len() != t.stride.len() {
-            bail!("{}: tensor {name}: {} sizes but {} strides", self.path, t.shape.len(), t.stride.len());
+            bail!(
+                "{}: tensor {name}: {} sizes but {} strides",
+                self.path,
+                t.shape.len(),
+                t.stride.len()
+            );
         }
         // Element offsets of the view in row-major order.
         let mut offsets = Vec::with_capacity(numel);
@@ -519,7 +535,11 @@ impl<'a> Unpickler<'a> {
     fn len(&mut self, n: u64) -> Result<usize> {
         let n = usize::try_from(n)?;
         if n > self.b.len() - self.at {
-            bail!("pickle declares {n} bytes at byte {}, only {} left", self.at, self.b.len() - self.at);
+            bail!(
+                "pickle declares {n} bytes at byte {}, only {} left",
+                self.at,
+                self.b.len() - self.at
+            );
         }
         Ok(n)
     }
@@ -633,7 +653,11 @@ impl<'a> Unpickler<'a> {
                     let n = self.len(n)?;
                     let b = self.take(n)?;
                     let v = if n <= 8 {
-                        let fill = if b.last().is_some_and(|&x| x & 0x80 != 0) { 0xff } else { 0 };
+                        let fill = if b.last().is_some_and(|&x| x & 0x80 != 0) {
+                            0xff
+                        } else {
+                            0
+                        };
                         let mut full = [fill; 8];
                         full[..n].copy_from_slice(b);
                         Value::Int(i64::from_le_bytes(full))
@@ -750,13 +774,15 @@ impl<'a> Unpickler<'a> {
                 0x81 => {
                     let args = self.pop()?;
                     let cls = self.pop()?;
-                    self.stack.push(new_object(&cls, args.elements().unwrap_or_default()));
+                    self.stack
+                        .push(new_object(&cls, args.elements().unwrap_or_default()));
                 }
                 0x92 => {
                     let _kwargs = self.pop()?;
                     let args = self.pop()?;
                     let cls = self.pop()?;
-                    self.stack.push(new_object(&cls, args.elements().unwrap_or_default()));
+                    self.stack
+                        .push(new_object(&cls, args.elements().unwrap_or_default()));
                 }
                 b'i' => {
                     let module = self.line()?.to_string();
@@ -817,7 +843,9 @@ impl<'a> Unpickler<'a> {
                     let pid = self.pop()?;
                     self.stack.push(persistent_load(pid)?);
                 }
-                b'P' => bail!("text persistent ids (PERSID) are not used by torch.save; byte {pos}"),
+                b'P' => {
+                    bail!("text persistent ids (PERSID) are not used by torch.save; byte {pos}")
+                }
                 other => bail!("unsupported pickle opcode 0x{other:02x} at byte {pos}"),
             }
         }
@@ -919,7 +947,10 @@ fn sizes(v: &Value, what: &str) -> Result<Vec<usize>> {
     v.elements()
         .ok_or_else(|| anyhow!("tensor {what} is a {}, not a tuple", v.type_name()))?
         .iter()
-        .map(|x| x.as_usize().ok_or_else(|| anyhow!("tensor {what} holds a non-size")))
+        .map(|x| {
+            x.as_usize()
+                .ok_or_else(|| anyhow!("tensor {what} holds a non-size"))
+        })
         .collect()
 }
 
@@ -953,7 +984,9 @@ fn reduce(callable: Value, args: Value) -> Result<Value> {
             }
             Value::Tensor(Rc::new(TensorRef {
                 storage,
-                offset: a[1].as_usize().ok_or_else(|| anyhow!("bad storage offset"))?,
+                offset: a[1]
+                    .as_usize()
+                    .ok_or_else(|| anyhow!("bad storage offset"))?,
                 shape: sizes(&a[2], "size")?,
                 stride: sizes(&a[3], "stride")?,
             }))
@@ -984,9 +1017,7 @@ fn reduce(callable: Value, args: Value) -> Result<Value> {
         ("builtins" | "__builtin__", "set" | "frozenset" | "list") => Value::List(Rc::new(
             RefCell::new(a.first().and_then(Value::elements).unwrap_or_default()),
         )),
-        ("copyreg", "_reconstructor") => {
-            new_object(a.first().unwrap_or(&Value::None), Vec::new())
-        }
+        ("copyreg", "_reconstructor") => new_object(a.first().unwrap_or(&Value::None), Vec::new()),
         _ => new_object(&callable, a),
     })
 }
@@ -1015,13 +1046,18 @@ mod tests {
     fn memo_shares_built_objects() {
         // An object built after it was memoized is seen built through the memo (as in Python).
         // c__main__\nA\n)\x81q\x00}X\x01\x00\x00\x00xK\x05sb h\x00 .  → the same object twice in a tuple
-        let mut b = b"\x80\x02c__main__\nA\nq\x00)\x81q\x01}q\x02X\x01\x00\x00\x00xK\x05sbh\x01\x86.".to_vec();
+        let mut b =
+            b"\x80\x02c__main__\nA\nq\x00)\x81q\x01}q\x02X\x01\x00\x00\x00xK\x05sbh\x01\x86."
+                .to_vec();
         // (obj, obj) after BUILD
         let v = run(&b).unwrap();
         let t = v.elements().unwrap();
         let Value::Object(o) = &t[1] else { panic!() };
         assert_eq!(o.borrow().class, "__main__.A");
-        assert!(matches!(o.borrow().state.as_ref().unwrap().get("x"), Some(Value::Int(5))));
+        assert!(matches!(
+            o.borrow().state.as_ref().unwrap().get("x"),
+            Some(Value::Int(5))
+        ));
         b.truncate(5);
         assert!(run(&b).unwrap_err().to_string().contains("ends"));
     }
@@ -1029,7 +1065,10 @@ mod tests {
     #[test]
     fn rejects_unknown_opcode_and_underflow() {
         let e = run(b"\x80\x02\xff.").unwrap_err().to_string();
-        assert!(e.contains("unsupported pickle opcode 0xff at byte 2"), "{e}");
+        assert!(
+            e.contains("unsupported pickle opcode 0xff at byte 2"),
+            "{e}"
+        );
         let e = run(b"\x80\x02t.").unwrap_err().to_string();
         assert!(e.contains("mark"), "{e}");
         let e = run(b"\x80\x02h\x07.").unwrap_err().to_string();

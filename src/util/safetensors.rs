@@ -34,7 +34,8 @@ pub fn looks_like(path: &Path) -> Result<bool> {
 pub fn read(path: &Path) -> Result<BTreeMap<String, HostTensor>> {
     let shown = path.display();
     let b = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
-    let (tensors, _) = parse(&b).with_context(|| format!("{shown} is not a valid safetensors file"))?;
+    let (tensors, _) =
+        parse(&b).with_context(|| format!("{shown} is not a valid safetensors file"))?;
     Ok(tensors)
 }
 
@@ -45,10 +46,13 @@ pub fn parse(b: &[u8]) -> Result<(BTreeMap<String, HostTensor>, BTreeMap<String,
     }
     let n = u64::from_le_bytes(b[..8].try_into().unwrap());
     if n > MAX_HEADER || n > (b.len() - 8) as u64 {
-        bail!("header length {n} does not fit the file of {} bytes (truncated?)", b.len());
+        bail!(
+            "header length {n} does not fit the file of {} bytes (truncated?)",
+            b.len()
+        );
     }
-    let header: Map<String, Value> = serde_json::from_slice(&b[8..8 + n as usize])
-        .context("the header is not a JSON object")?;
+    let header: Map<String, Value> =
+        serde_json::from_slice(&b[8..8 + n as usize]).context("the header is not a JSON object")?;
     let data = &b[8 + n as usize..];
     let mut out = BTreeMap::new();
     let mut meta = BTreeMap::new();
@@ -61,7 +65,9 @@ pub fn parse(b: &[u8]) -> Result<(BTreeMap<String, HostTensor>, BTreeMap<String,
             }
             continue;
         }
-        let dtype = v["dtype"].as_str().with_context(|| format!("tensor {name}: no dtype"))?;
+        let dtype = v["dtype"]
+            .as_str()
+            .with_context(|| format!("tensor {name}: no dtype"))?;
         let shape: Vec<usize> = v["shape"]
             .as_array()
             .with_context(|| format!("tensor {name}: no shape"))?
@@ -97,13 +103,41 @@ pub fn parse(b: &[u8]) -> Result<(BTreeMap<String, HostTensor>, BTreeMap<String,
         let raw = &data[off[0]..off[1]];
         let chunks = raw.chunks_exact(size);
         let data = match dtype {
-            "F16" => HostData::F32(chunks.map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32()).collect()),
-            "BF16" => HostData::F32(chunks.map(|c| half::bf16::from_le_bytes([c[0], c[1]]).to_f32()).collect()),
-            "F32" => HostData::F32(chunks.map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect()),
-            "F64" => HostData::F32(chunks.map(|c| f64::from_le_bytes(c.try_into().unwrap()) as f32).collect()),
-            "I64" => HostData::I64(chunks.map(|c| i64::from_le_bytes(c.try_into().unwrap())).collect()),
-            "I32" => HostData::I64(chunks.map(|c| i32::from_le_bytes(c.try_into().unwrap()) as i64).collect()),
-            "I16" => HostData::I64(chunks.map(|c| i16::from_le_bytes([c[0], c[1]]) as i64).collect()),
+            "F16" => HostData::F32(
+                chunks
+                    .map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32())
+                    .collect(),
+            ),
+            "BF16" => HostData::F32(
+                chunks
+                    .map(|c| half::bf16::from_le_bytes([c[0], c[1]]).to_f32())
+                    .collect(),
+            ),
+            "F32" => HostData::F32(
+                chunks
+                    .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+                    .collect(),
+            ),
+            "F64" => HostData::F32(
+                chunks
+                    .map(|c| f64::from_le_bytes(c.try_into().unwrap()) as f32)
+                    .collect(),
+            ),
+            "I64" => HostData::I64(
+                chunks
+                    .map(|c| i64::from_le_bytes(c.try_into().unwrap()))
+                    .collect(),
+            ),
+            "I32" => HostData::I64(
+                chunks
+                    .map(|c| i32::from_le_bytes(c.try_into().unwrap()) as i64)
+                    .collect(),
+            ),
+            "I16" => HostData::I64(
+                chunks
+                    .map(|c| i16::from_le_bytes([c[0], c[1]]) as i64)
+                    .collect(),
+            ),
             "I8" => HostData::I64(chunks.map(|c| c[0] as i8 as i64).collect()),
             _ => HostData::I64(chunks.map(|c| c[0] as i64).collect()),
         };
@@ -121,7 +155,10 @@ pub fn parse(b: &[u8]) -> Result<(BTreeMap<String, HostTensor>, BTreeMap<String,
 
 /// The bytes of a safetensors file holding `tensors` (f32 → `F32`, i64 → `I64`) in the given
 /// order, with `metadata` as `__metadata__`. The header is padded to a multiple of 8 bytes.
-pub fn to_bytes(tensors: &[(String, HostTensor)], metadata: &BTreeMap<String, String>) -> Result<Vec<u8>> {
+pub fn to_bytes(
+    tensors: &[(String, HostTensor)],
+    metadata: &BTreeMap<String, String>,
+) -> Result<Vec<u8>> {
     let mut header = Map::new();
     if !metadata.is_empty() {
         header.insert("__metadata__".into(), json!(metadata));
@@ -136,7 +173,11 @@ pub fn to_bytes(tensors: &[(String, HostTensor)], metadata: &BTreeMap<String, St
             HostData::I64(v) => ("I64", 8 * v.len()),
         };
         if bytes / if dtype == "F32" { 4 } else { 8 } != t.numel() {
-            bail!("tensor {name}: shape {:?} does not match its {} elements", t.shape, bytes);
+            bail!(
+                "tensor {name}: shape {:?} does not match its {} elements",
+                t.shape,
+                bytes
+            );
         }
         header.insert(
             name.clone(),
@@ -153,15 +194,23 @@ pub fn to_bytes(tensors: &[(String, HostTensor)], metadata: &BTreeMap<String, St
     out.extend_from_slice(&h);
     for (_, t) in tensors {
         match &t.data {
-            HostData::F32(v) => v.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
-            HostData::I64(v) => v.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
+            HostData::F32(v) => v
+                .iter()
+                .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
+            HostData::I64(v) => v
+                .iter()
+                .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
         }
     }
     Ok(out)
 }
 
 /// Writes a safetensors file atomically (temp + rename).
-pub fn write(path: &Path, tensors: &[(String, HostTensor)], metadata: &BTreeMap<String, String>) -> Result<()> {
+pub fn write(
+    path: &Path,
+    tensors: &[(String, HostTensor)],
+    metadata: &BTreeMap<String, String>,
+) -> Result<()> {
     super::write_atomic(path, &to_bytes(tensors, metadata)?)
 }
 
@@ -172,7 +221,10 @@ mod tests {
     #[test]
     fn round_trips_and_rejects_truncation() {
         let t = vec![
-            ("a.w".to_string(), HostTensor::f32(vec![2, 2], vec![1.0, -2.0, 3.5, 0.25])),
+            (
+                "a.w".to_string(),
+                HostTensor::f32(vec![2, 2], vec![1.0, -2.0, 3.5, 0.25]),
+            ),
             (
                 "n".to_string(),
                 HostTensor {

@@ -71,8 +71,8 @@ pub fn read_state_dict(path: &Path, prefer: &[&str]) -> Result<StateDict> {
         });
     }
     let pt = PtFile::open(path)?;
-    let (entries, origin) = pick(&pt.root, prefer)
-        .with_context(|| format!("{}: no weights found", path.display()))?;
+    let (entries, origin) =
+        pick(&pt.root, prefer).with_context(|| format!("{}: no weights found", path.display()))?;
     Ok(StateDict {
         tensors: pt.read_all(&entries)?,
         origin,

@@ -80,6 +80,18 @@ pub fn layout_error(cfg: &YoloSegConfig) -> Option<String> {
                 .into(),
         );
     }
+    // ultralytics gives C2PSA `c // 64` attention heads (c = half the P5 width) and cannot
+    // build the model below one; chicktrain keeps one head there.
+    let c = super::scale::Scaler::new(cfg.scale, cfg.width_mult).ch(1024) / 2;
+    if c < 64 {
+        return Some(format!(
+            "ultralytics builds C2PSA with (P5 width / 2) // 64 attention heads, 0 at this width \
+             (scale {}, width ×{}: C2PSA width {c}); it needs a P5 width of at least 128 \
+             (scale n: model.width_mult >= 0.5)",
+            cfg.scale.name(),
+            cfg.width_mult
+        ));
+    }
     None
 }
 
@@ -91,7 +103,11 @@ pub fn ultralytics_key(path: &str) -> Option<String> {
             let n = match *l {
                 "sppf" => 9,
                 "psa" => 10,
-                l => l.strip_prefix('l')?.parse::<usize>().ok().filter(|&n| n <= 8)?,
+                l => l
+                    .strip_prefix('l')?
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|&n| n <= 8)?,
             };
             (format!("model.{n}"), rest)
         }
@@ -169,9 +185,7 @@ impl ModuleVisitor for Tensors {
     }
     fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
         let shape: Vec<usize> = param.lazy_shape().into();
-        let data = self
-            .data
-            .then(|| crate::util::tensor::to_host(param.val()));
+        let data = self.data.then(|| crate::util::tensor::to_host(param.val()));
         self.out.push((self.path.join("."), shape, data));
     }
 }
@@ -220,9 +234,9 @@ pub fn ultralytics_state_dict(
     for (ours, shape, data) in tensors(model, true) {
         let theirs = ultralytics_key(&ours)
             .with_context(|| format!("module path {ours} has no ultralytics name"))?;
-        let bn_end = theirs.ends_with(".bn.running_var").then(|| {
-            theirs.trim_end_matches("running_var").to_string() + "num_batches_tracked"
-        });
+        let bn_end = theirs
+            .ends_with(".bn.running_var")
+            .then(|| theirs.trim_end_matches("running_var").to_string() + "num_batches_tracked");
         out.push((theirs, HostTensor::f32(shape, data.unwrap_or_default())));
         if let Some(k) = bn_end {
             out.push((
@@ -237,7 +251,10 @@ pub fn ultralytics_state_dict(
     }
     out.push((
         DFL_KEY.to_string(),
-        HostTensor::f32(vec![1, REG_MAX, 1, 1], (0..REG_MAX).map(|i| i as f32).collect()),
+        HostTensor::f32(
+            vec![1, REG_MAX, 1, 1],
+            (0..REG_MAX).map(|i| i as f32).collect(),
+        ),
     ));
     Ok(out)
 }
@@ -313,7 +330,8 @@ pub fn from_state_dict(
     let mut class_unfit = Vec::new();
     let mut missing = Vec::new();
     for kp in &map {
-        let seg_head = kp.theirs.starts_with("model.23.proto.") || kp.theirs.starts_with("model.23.cv4.");
+        let seg_head =
+            kp.theirs.starts_with("model.23.proto.") || kp.theirs.starts_with("model.23.cv4.");
         let Some(ft) = t.get(&kp.theirs) else {
             if seg_head && !has_seg_head {
                 missing.push(kp.ours.clone());
@@ -349,10 +367,20 @@ pub fn from_state_dict(
             );
         }
         let HostData::F32(v) = &ft.data else {
-            bail!("{f}: {} is {}, a float tensor was expected", kp.theirs, ft.source_dtype);
+            bail!(
+                "{f}: {} is {}, a float tensor was expected",
+                kp.theirs,
+                ft.source_dtype
+            );
         };
         let (bytes, shape, dtype) = TensorData::new(v.clone(), kp.shape.clone()).into_parts();
-        snapshots.push(burn_pack::Tensor::new(kp.ours.clone(), dtype, shape, None, bytes));
+        snapshots.push(burn_pack::Tensor::new(
+            kp.ours.clone(),
+            dtype,
+            shape,
+            None,
+            bytes,
+        ));
     }
     if let Some(dfl) = t.get(DFL_KEY) {
         let expect: Vec<f32> = (0..REG_MAX).map(|i| i as f32).collect();
@@ -370,7 +398,10 @@ pub fn from_state_dict(
             !used.contains(&k.as_str())
                 && k.as_str() != DFL_KEY
                 && !(k.ends_with(".num_batches_tracked")
-                    && used.contains(&(k.trim_end_matches("num_batches_tracked").to_string() + "running_var").as_str()))
+                    && used.contains(
+                        &(k.trim_end_matches("num_batches_tracked").to_string() + "running_var")
+                            .as_str(),
+                    ))
         })
         .collect();
     extra.sort_by(|a, b| natural_cmp(a, b));
@@ -477,25 +508,52 @@ mod tests {
             ("backbone.l0.conv.weight", "model.0.conv.weight"),
             ("backbone.l0.bn.gamma", "model.0.bn.weight"),
             ("backbone.l0.bn.beta", "model.0.bn.bias"),
-            ("backbone.l2.m.0.Bottleneck.cv1.bn.running_mean", "model.2.m.0.cv1.bn.running_mean"),
-            ("backbone.l8.m.0.C3k.m.1.cv2.conv.weight", "model.8.m.0.m.1.cv2.conv.weight"),
+            (
+                "backbone.l2.m.0.Bottleneck.cv1.bn.running_mean",
+                "model.2.m.0.cv1.bn.running_mean",
+            ),
+            (
+                "backbone.l8.m.0.C3k.m.1.cv2.conv.weight",
+                "model.8.m.0.m.1.cv2.conv.weight",
+            ),
             ("backbone.sppf.cv2.conv.weight", "model.9.cv2.conv.weight"),
-            ("backbone.psa.m.0.attn.qkv.bn.running_var", "model.10.m.0.attn.qkv.bn.running_var"),
-            ("backbone.psa.m.0.ffn1.conv.weight", "model.10.m.0.ffn.0.conv.weight"),
-            ("backbone.psa.m.0.ffn2.bn.gamma", "model.10.m.0.ffn.1.bn.weight"),
+            (
+                "backbone.psa.m.0.attn.qkv.bn.running_var",
+                "model.10.m.0.attn.qkv.bn.running_var",
+            ),
+            (
+                "backbone.psa.m.0.ffn1.conv.weight",
+                "model.10.m.0.ffn.0.conv.weight",
+            ),
+            (
+                "backbone.psa.m.0.ffn2.bn.gamma",
+                "model.10.m.0.ffn.1.bn.weight",
+            ),
             ("neck.td_p4.cv1.conv.weight", "model.13.cv1.conv.weight"),
             ("neck.p3.td_p3.cv2.conv.weight", "model.16.cv2.conv.weight"),
             ("neck.p3.down_p3.conv.weight", "model.17.conv.weight"),
             ("neck.p3.bu_p4.cv1.conv.weight", "model.19.cv1.conv.weight"),
             ("neck.down_p4.bn.beta", "model.20.bn.bias"),
-            ("neck.bu_p5.m.0.C3k.cv3.conv.weight", "model.22.m.0.cv3.conv.weight"),
+            (
+                "neck.bu_p5.m.0.C3k.cv3.conv.weight",
+                "model.22.m.0.cv3.conv.weight",
+            ),
             ("head.boxes.2.out.bias", "model.23.cv2.2.2.bias"),
-            ("head.cls.1.dw2.conv.weight", "model.23.cv3.1.1.0.conv.weight"),
+            (
+                "head.cls.1.dw2.conv.weight",
+                "model.23.cv3.1.1.0.conv.weight",
+            ),
             ("head.cls.0.pw1.bn.gamma", "model.23.cv3.0.0.1.bn.weight"),
             ("head.cls.0.out.weight", "model.23.cv3.0.2.weight"),
             ("head.coef.1.c2.conv.weight", "model.23.cv4.1.1.conv.weight"),
-            ("head.proto.upsample.weight", "model.23.proto.upsample.weight"),
-            ("head.proto.cv3.bn.running_mean", "model.23.proto.cv3.bn.running_mean"),
+            (
+                "head.proto.upsample.weight",
+                "model.23.proto.upsample.weight",
+            ),
+            (
+                "head.proto.cv3.bn.running_mean",
+                "model.23.proto.cv3.bn.running_mean",
+            ),
         ] {
             assert_eq!(ultralytics_key(ours).as_deref(), Some(theirs), "{ours}");
         }
@@ -505,9 +563,22 @@ mod tests {
 
     #[test]
     fn natural_order_is_ultralytics_order() {
-        let mut v = vec!["model.10.cv1", "model.2.cv1", "model.2.m.0", "model.23.cv2.0"];
+        let mut v = vec![
+            "model.10.cv1",
+            "model.2.cv1",
+            "model.2.m.0",
+            "model.23.cv2.0",
+        ];
         v.sort_by(|a, b| natural_cmp(a, b));
-        assert_eq!(v, ["model.2.cv1", "model.2.m.0", "model.10.cv1", "model.23.cv2.0"]);
+        assert_eq!(
+            v,
+            [
+                "model.2.cv1",
+                "model.2.m.0",
+                "model.10.cv1",
+                "model.23.cv2.0"
+            ]
+        );
     }
 
     #[test]
@@ -516,5 +587,9 @@ mod tests {
         assert!(layout_error(&c).unwrap().contains("model.c2psa = false"));
         let c = YoloSegConfig::new(super::super::Scale::N, 1).with_levels(HeadLevels::P4P5);
         assert!(exported_keys(&c).unwrap_err().to_string().contains("P3–P5"));
+        let c = YoloSegConfig::new(super::super::Scale::N, 1).with_width_mult(0.25);
+        assert!(layout_error(&c).unwrap().contains("C2PSA width 32"));
+        let c = YoloSegConfig::new(super::super::Scale::N, 1).with_width_mult(0.5);
+        assert_eq!(layout_error(&c), None);
     }
 }
