@@ -307,7 +307,12 @@ pub struct PtFile {
     archive: RefCell<zip::ZipArchive<std::fs::File>>,
     prefix: String,
     path: String,
+    file_len: u64,
 }
+
+/// Largest tensor view read (elements): a view may repeat its storage (stride 0), so the
+/// file does not bound it; 2^31 f32 is 8 GiB, far above any YOLO or Mask R-CNN tensor.
+const MAX_VIEW_ELEMENTS: usize = 1 << 31;
 
 /// Magic of the pre-1.6 (non-zip) `torch.save` format: a pickled long 0x1950a86a20f9469cfc6c.
 const LEGACY_MAGIC: [u8; 10] = [0x6c, 0xfc, 0x9c, 0x46, 0xf9, 0x20, 0x6a, 0xa8, 0x50, 0x19];
@@ -332,6 +337,7 @@ impl PtFile {
             bail!("{shown} is not a PyTorch checkpoint (a .pt file is a zip archive; this one starts with {head:02x?})");
         }
         let file = std::fs::File::open(path).with_context(|| format!("cannot open {shown}"))?;
+        let file_len = file.metadata().map(|m| m.len()).unwrap_or(0);
         let mut archive = zip::ZipArchive::new(file).map_err(|e| {
             anyhow!("{shown} is not a readable PyTorch zip archive (truncated or damaged?): {e}")
         })?;
@@ -348,7 +354,9 @@ impl PtFile {
             let mut e = archive
                 .by_name(&pkl)
                 .map_err(|e| anyhow!("{shown}: cannot read {pkl}: {e}"))?;
-            let mut b = Vec::with_capacity(e.size().min(1 << 28) as usize);
+            // The entry's size comes from the (possibly damaged) zip header: do not trust it
+            // beyond the file's own length.
+            let mut b = Vec::with_capacity(e.size().min(file_len) as usize);
             e.read_to_end(&mut b)
                 .with_context(|| format!("{shown}: cannot read {pkl} (truncated?)"))?;
             b
@@ -361,6 +369,7 @@ impl PtFile {
             archive: RefCell::new(archive),
             prefix,
             path: shown,
+            file_len,
         })
     }
 
@@ -381,7 +390,7 @@ impl PtFile {
                     self.path
                 )
             })?;
-            if (e.size() as usize) < need {
+            if (e.size() as usize) < need || need as u64 > self.file_len {
                 bail!(
                     "{}: tensor {name}: storage {entry} holds {} bytes, {need} needed",
                     self.path,
@@ -396,7 +405,17 @@ impl PtFile {
                 )
             })?;
         }
-        let numel: usize = t.shape.iter().product();
+        let numel = t
+            .shape
+            .iter()
+            .try_fold(1usize, |a, &d| a.checked_mul(d))
+            .filter(|&n| n <= MAX_VIEW_ELEMENTS)
+            .with_context(|| {
+                format!(
+                    "{}: tensor {name} of shape {:?} is too large",
+                    self.path, t.shape
+                )
+            })?;
         if t.shape.len() != t.stride.len() {
             bail!(
                 "{}: tensor {name}: {} sizes but {} strides",
@@ -496,6 +515,22 @@ struct Unpickler<'a> {
     stack: Vec<Value>,
     marks: Vec<usize>,
     memo: HashMap<u32, Value>,
+    /// Nesting depth of each container built so far, by address: a hostile pickle could nest
+    /// deep enough to overflow the stack when the values are dropped or walked.
+    depth: HashMap<usize, u32>,
+}
+
+/// Containers nested deeper than this are refused (real checkpoints nest a few dozen deep).
+const MAX_NESTING: u32 = 1000;
+
+fn address(v: &Value) -> Option<usize> {
+    Some(match v {
+        Value::Tuple(r) => Rc::as_ptr(r) as *const () as usize,
+        Value::List(r) => Rc::as_ptr(r) as *const () as usize,
+        Value::Dict(r) => Rc::as_ptr(r) as *const () as usize,
+        Value::Object(r) => Rc::as_ptr(r) as *const () as usize,
+        _ => return None,
+    })
 }
 
 impl<'a> Unpickler<'a> {
@@ -506,7 +541,34 @@ impl<'a> Unpickler<'a> {
             stack: Vec::new(),
             marks: Vec::new(),
             memo: HashMap::new(),
+            depth: HashMap::new(),
         }
+    }
+
+    fn depth_of(&self, v: &Value) -> u32 {
+        address(v)
+            .and_then(|a| self.depth.get(&a).copied())
+            .unwrap_or(0)
+    }
+
+    fn max_depth(&self, items: &[Value]) -> u32 {
+        items.iter().map(|v| self.depth_of(v)).max().unwrap_or(0)
+    }
+
+    /// Records that the container on top of the stack holds values `inner` deep.
+    fn nest_top(&mut self, inner: u32) -> Result<()> {
+        let Some(a) = self.stack.last().and_then(address) else {
+            return Ok(());
+        };
+        let d = self.depth.entry(a).or_insert(0);
+        *d = (*d).max(inner + 1);
+        if *d > MAX_NESTING {
+            bail!(
+                "pickle nests containers more than {MAX_NESTING} deep (byte {})",
+                self.at
+            );
+        }
+        Ok(())
     }
 
     fn take(&mut self, n: usize) -> Result<&'a [u8]> {
@@ -702,7 +764,9 @@ impl<'a> Unpickler<'a> {
                 b')' => self.stack.push(Value::Tuple(Rc::new(Vec::new()))),
                 b't' => {
                     let items = self.pop_mark()?;
+                    let d = self.max_depth(&items);
                     self.stack.push(Value::Tuple(Rc::new(items)));
+                    self.nest_top(d)?;
                 }
                 0x85..=0x87 => {
                     let n = (op - 0x84) as usize;
@@ -710,12 +774,16 @@ impl<'a> Unpickler<'a> {
                         bail!("pickle stack underflow at byte {pos}");
                     }
                     let items = self.stack.split_off(self.stack.len() - n);
+                    let d = self.max_depth(&items);
                     self.stack.push(Value::Tuple(Rc::new(items)));
+                    self.nest_top(d)?;
                 }
                 b']' => self.stack.push(Value::List(Rc::default())),
                 b'l' => {
                     let items = self.pop_mark()?;
+                    let d = self.max_depth(&items);
                     self.stack.push(Value::List(Rc::new(RefCell::new(items))));
+                    self.nest_top(d)?;
                 }
                 b'a' => {
                     let v = self.pop()?;
@@ -748,7 +816,9 @@ impl<'a> Unpickler<'a> {
                 }
                 0x91 => {
                     let items = self.pop_mark()?;
+                    let d = self.max_depth(&items);
                     self.stack.push(Value::List(Rc::new(RefCell::new(items))));
+                    self.nest_top(d)?;
                 }
                 b'c' => {
                     let module = self.line()?.to_string();
@@ -768,21 +838,27 @@ impl<'a> Unpickler<'a> {
                 b'R' => {
                     let args = self.pop()?;
                     let callable = self.pop()?;
+                    let d = self.depth_of(&args);
                     let v = reduce(callable, args)?;
                     self.stack.push(v);
+                    self.nest_top(d)?;
                 }
                 0x81 => {
                     let args = self.pop()?;
                     let cls = self.pop()?;
+                    let d = self.depth_of(&args);
                     self.stack
                         .push(new_object(&cls, args.elements().unwrap_or_default()));
+                    self.nest_top(d)?;
                 }
                 0x92 => {
                     let _kwargs = self.pop()?;
                     let args = self.pop()?;
                     let cls = self.pop()?;
+                    let d = self.depth_of(&args);
                     self.stack
                         .push(new_object(&cls, args.elements().unwrap_or_default()));
+                    self.nest_top(d)?;
                 }
                 b'i' => {
                     let module = self.line()?.to_string();
@@ -802,7 +878,9 @@ impl<'a> Unpickler<'a> {
                 b'b' => {
                     let state = self.pop()?;
                     let obj = self.top()?.clone();
+                    let d = self.depth_of(&state);
                     build(&obj, state)?;
+                    self.nest_top(d)?;
                 }
                 b'p' => {
                     let i: u32 = self.line()?.trim().parse()?;
@@ -852,6 +930,8 @@ impl<'a> Unpickler<'a> {
     }
 
     fn extend_list(&mut self, items: Vec<Value>) -> Result<()> {
+        let d = self.max_depth(&items);
+        self.nest_top(d)?;
         match self.top()? {
             Value::List(l) => l.borrow_mut().extend(items),
             Value::Object(o) => o.borrow_mut().elements.extend(items),
@@ -864,6 +944,8 @@ impl<'a> Unpickler<'a> {
         if items.len() % 2 != 0 {
             bail!("SETITEMS with an odd number of values at byte {}", self.at);
         }
+        let d = self.max_depth(&items);
+        self.nest_top(d)?;
         let mut pairs = Vec::with_capacity(items.len() / 2);
         let mut it = items.into_iter();
         while let (Some(k), Some(v)) = (it.next(), it.next()) {
@@ -1060,6 +1142,39 @@ mod tests {
         ));
         b.truncate(5);
         assert!(run(&b).unwrap_err().to_string().contains("ends"));
+    }
+
+    #[test]
+    fn refuses_deep_nesting_and_survives_damage() {
+        // 5000 nested 1-tuples: refused with a message, not a stack overflow.
+        let mut b = b"\x80\x02N".to_vec();
+        b.extend(std::iter::repeat_n(0x85u8, 5000));
+        b.push(b'.');
+        let e = run(&b).unwrap_err().to_string();
+        assert!(e.contains("more than 1000 deep"), "{e}");
+        // Every prefix and every single-byte change of a real torch pickle: an error or a
+        // value, never a panic.
+        let f = std::fs::File::open(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/fixtures/ultralytics/reader/stripped.pt"),
+        )
+        .unwrap();
+        let mut ar = zip::ZipArchive::new(f).unwrap();
+        let mut pkl = Vec::new();
+        ar.by_name("stripped/data.pkl")
+            .unwrap()
+            .read_to_end(&mut pkl)
+            .unwrap();
+        let root = run(&pkl).unwrap();
+        assert!(root.get("model").unwrap().is_module());
+        for n in 0..pkl.len() {
+            let _ = run(&pkl[..n]);
+            for x in [0x00u8, 0xff, b'(', b't', b'h'] {
+                let mut c = pkl.clone();
+                c[n] = x;
+                let _ = run(&c);
+            }
+        }
     }
 
     #[test]
