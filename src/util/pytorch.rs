@@ -429,7 +429,11 @@ impl PtFile {
         if numel > 0 {
             let mut idx = vec![0usize; t.shape.len()];
             loop {
-                let off = t.offset + idx.iter().zip(&t.stride).map(|(i, s)| i * s).sum::<usize>();
+                let off = idx
+                    .iter()
+                    .zip(&t.stride)
+                    .try_fold(t.offset, |a, (i, s)| a.checked_add(i.checked_mul(*s)?))
+                    .unwrap_or(usize::MAX);
                 if off >= st.numel {
                     bail!(
                         "{}: tensor {name} (shape {:?}, stride {:?}, offset {}) reaches past its storage of {} elements",
@@ -506,6 +510,12 @@ impl PtFile {
         }
         Ok(out)
     }
+}
+
+/// Unpickles `bytes` (a `data.pkl`): the root value, persistent ids resolved to storage
+/// references. For fuzzing and for files that are a bare pickle.
+pub fn unpickle(bytes: &[u8]) -> Result<Value> {
+    Unpickler::new(bytes).run()
 }
 
 /// The pickle virtual machine (protocols 0–5, no extension registry, no out-of-band buffers).
@@ -1006,7 +1016,11 @@ fn persistent_load(pid: Value) -> Result<Value> {
         .elements()
         .ok_or_else(|| anyhow!("persistent id is a {}, not a tuple", pid.type_name()))?;
     if f.first().and_then(Value::as_str) != Some("storage") || f.len() < 5 {
-        bail!("unsupported persistent id {f:?} (only torch storages are read)");
+        let kinds: Vec<String> = f.iter().map(Value::type_name).collect();
+        bail!(
+            "unsupported persistent id ({}) (only torch storages are read)",
+            kinds.join(", ")
+        );
     }
     let dtype = match &f[1] {
         Value::Class(c) => StorageType::from_class(&c.1),
@@ -1060,7 +1074,7 @@ fn reduce(callable: Value, args: Value) -> Result<Value> {
                     storage = Rc::new(Storage {
                         key: s.key.clone(),
                         dtype,
-                        numel: s.numel * s.dtype.size() / dtype.size(),
+                        numel: s.numel.saturating_mul(s.dtype.size()) / dtype.size(),
                     });
                 }
             }

@@ -93,10 +93,13 @@ pub fn parse(b: &[u8]) -> Result<(BTreeMap<String, HostTensor>, BTreeMap<String,
             "BOOL" => (1, "bool"),
             other => bail!("tensor {name}: dtype {other} is not supported"),
         };
-        let numel: usize = shape.iter().product();
-        if off[1] < off[0] || off[1] > data.len() || off[1] - off[0] != numel * size {
+        let bytes = shape
+            .iter()
+            .try_fold(size as usize, |a: usize, &d| a.checked_mul(d))
+            .with_context(|| format!("tensor {name}: shape {shape:?} is too large"))?;
+        if off[1] < off[0] || off[1] > data.len() || off[1] - off[0] != bytes {
             bail!(
-                "tensor {name}: data_offsets {off:?} do not hold {numel} {dtype} values in {} data bytes (truncated?)",
+                "tensor {name}: data_offsets {off:?} do not hold {shape:?} {dtype} values in {} data bytes (truncated?)",
                 data.len()
             );
         }
