@@ -7,6 +7,7 @@ use clap::{Args, Parser, Subcommand};
 
 use chicktrain::commands::bench::{self as bench_cmd, EffortFlags};
 use chicktrain::commands::data;
+use chicktrain::commands::export::{self as export_cmd, ExportFormat};
 use chicktrain::commands::train::{self as train_cmd, SplitName};
 use chicktrain::config::DeviceKind;
 use chicktrain::eval::IouType;
@@ -93,6 +94,17 @@ enum Command {
         out: PathBuf,
         #[arg(long)]
         device: Option<DeviceKind>,
+    },
+    /// Export a checkpoint for other tools: `safetensors` (the weights under ultralytics'
+    /// state_dict names) or `onnx`.
+    Export {
+        #[arg(long)]
+        checkpoint: PathBuf,
+        #[arg(long, value_enum)]
+        format: ExportFormat,
+        /// Output file (default: the checkpoint's path with the format's extension).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Render auto-labelled carcass piles: images/, annotations.json (COCO), preview.png.
     Render {
@@ -401,6 +413,11 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             out,
             device,
         }) => train_cmd::predict_cmd(&checkpoint, &input, &out, device),
+        Some(Command::Export {
+            checkpoint,
+            format,
+            out,
+        }) => export_cmd::export_cmd(&checkpoint, format, out.as_deref()),
         Some(Command::Render {
             out,
             count,

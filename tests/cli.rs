@@ -56,6 +56,7 @@ fn every_subcommand_has_help() {
         "bench",
         "coco-eval",
         "convert",
+        "export",
     ] {
         let out = run(&[sub, "--help"]);
         assert!(out.status.success(), "{sub} --help");

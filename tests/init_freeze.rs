@@ -115,7 +115,13 @@ fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
         num_classes: 3,
         ..c.clone()
     };
-    let (_, note) = load_init(Detector::Yolo(c3.init(&dev)), &start, &dev).unwrap();
+    let (_, note) = load_init(
+        Detector::Yolo(c3.init(&dev)),
+        &DetectorConfig::Yolo(c3.clone()),
+        &start,
+        &dev,
+    )
+    .unwrap();
     assert!(note.contains("keep their fresh initialisation"), "{note}");
     let listed = note.lines().nth(1).unwrap().split(": ").last().unwrap();
     assert!(
@@ -127,7 +133,13 @@ fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
     let mcfg = chicktrain::model::maskrcnn::MaskRcnnConfig::new(18, 1).with_width_mult(0.25);
     let e = format!(
         "{:#}",
-        load_init(Detector::MaskRcnn(mcfg.init(&dev)), &start, &dev).unwrap_err()
+        load_init(
+            Detector::MaskRcnn(mcfg.init(&dev)),
+            &DetectorConfig::Maskrcnn(mcfg.clone()),
+            &start,
+            &dev
+        )
+        .unwrap_err()
     );
     assert!(
         e.contains("best.bpk") && e.contains("cannot start the other"),
@@ -137,7 +149,13 @@ fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/torchvision/resnet18_w8.pth");
     let e = format!(
         "{:#}",
-        load_init(Detector::Yolo(c.init(&dev)), &pth, &dev).unwrap_err()
+        load_init(
+            Detector::Yolo(c.init(&dev)),
+            &DetectorConfig::Yolo(c.clone()),
+            &pth,
+            &dev
+        )
+        .unwrap_err()
     );
     assert!(
         e.contains("resnet18_w8.pth") && e.contains("ultralytics import not built in this branch"),
@@ -208,7 +226,7 @@ fn maskrcnn_freeze_at_2_keeps_stem_and_res2() {
 #[test]
 fn torchvision_weights_through_the_config_and_frozen_stages_keep_them() {
     use chicktrain::model::maskrcnn::torchvision::map_state_dict;
-    use chicktrain::model::weights::pytorch;
+    use chicktrain::model::weights::read_file;
     let d = tmp("tv-config");
     let pth = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures/torchvision/maskrcnn_r50_w8.pth");
@@ -236,18 +254,17 @@ fn torchvision_weights_through_the_config_and_frozen_stages_keep_them() {
         ..Default::default()
     };
     train(shipped("maskrcnn_r50_syn250", &d, &sets), &opts).unwrap();
-    let file: HashMap<String, Vec<f32>> =
-        map_state_dict(pytorch::read(&std::fs::read(&pth).unwrap()).unwrap(), 1)
-            .unwrap()
-            .snapshots
-            .into_iter()
-            .map(|s| {
-                (
-                    s.name.clone(),
-                    snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap(),
-                )
-            })
-            .collect();
+    let file: HashMap<String, Vec<f32>> = map_state_dict(read_file(&pth, &[]).unwrap(), 1)
+        .unwrap()
+        .snapshots
+        .into_iter()
+        .map(|s| {
+            (
+                s.name.clone(),
+                snapshot_data(s).unwrap().try_to_vec::<f32>().unwrap(),
+            )
+        })
+        .collect();
     let trained = tensors(&d.join("run/last.bpk"), "model");
     let frozen = |k: &str| k.starts_with("backbone.stem.") || k.starts_with("backbone.stages.0.");
     let (mut same, mut moved) = (0, 0);

@@ -16,7 +16,7 @@ use chicktrain::model::maskrcnn::roi_heads::RoiHeadsConfig;
 use chicktrain::model::maskrcnn::torchvision::{class_dependent, map_state_dict, TorchvisionKind};
 use chicktrain::model::maskrcnn::{MaskRcnn, MaskRcnnConfig, STRIDES};
 use chicktrain::model::weights::{self, apply_named, snapshot_data};
-use chicktrain::train::detector::Detector;
+use chicktrain::train::detector::{Detector, DetectorConfig};
 use chicktrain::train::init::load_init;
 
 fn fixture(name: &str) -> PathBuf {
@@ -26,8 +26,7 @@ fn fixture(name: &str) -> PathBuf {
 }
 
 fn reference() -> HashMap<String, TensorData> {
-    let b = std::fs::read(fixture("reference.safetensors")).unwrap();
-    weights::safetensors::read(&b)
+    weights::read_file(&fixture("reference.safetensors"), &[])
         .unwrap()
         .into_iter()
         .map(|s| (s.name.clone(), snapshot_data(s).unwrap()))
@@ -74,7 +73,13 @@ fn check<const D: usize>(what: &str, t: Tensor<D>, want: &TensorData) {
 
 /// The model the Mask R-CNN fixture describes: paper preset, R50 at width ×0.125, 16-wide
 /// FPN, 32-wide box FCs, 16-wide mask convs, one class.
-fn fixture_maskrcnn(dev: &Device) -> MaskRcnn {
+/// `model.init` of `path` into a fresh model of `cfg`.
+fn init_from(cfg: MaskRcnnConfig, path: &Path, dev: &Device) -> anyhow::Result<(Detector, String)> {
+    let c = DetectorConfig::Maskrcnn(cfg);
+    load_init(c.init(dev), &c, path, dev)
+}
+
+fn fixture_config() -> MaskRcnnConfig {
     let p = MaskRcnnConfig::paper(50, 1);
     p.clone()
         .with_width_mult(0.125)
@@ -88,7 +93,6 @@ fn fixture_maskrcnn(dev: &Device) -> MaskRcnn {
             conv_dim: 16,
             ..p.mask.clone()
         })
-        .init(dev)
 }
 
 #[test]
@@ -98,11 +102,11 @@ fn resnet18_state_dicts_give_torchvision_stages() {
     let x: Tensor<4> = tensor(&r["x"], &dev);
     for file in ["resnet18_w8.pth", "resnet18_w8.safetensors"] {
         let bytes = std::fs::read(fixture(file)).unwrap();
-        let tensors = match weights::sniff(&bytes) {
-            Some(weights::Format::TorchZip) => weights::pytorch::read(&bytes).unwrap(),
-            Some(weights::Format::Safetensors) => weights::safetensors::read(&bytes).unwrap(),
+        match weights::sniff(&bytes) {
+            Some(weights::Format::TorchZip | weights::Format::Safetensors) => {}
             f => panic!("{file}: {f:?}"),
-        };
+        }
+        let tensors = weights::read_file(&fixture(file), &[]).unwrap();
         let mapped = map_state_dict(tensors, 1).unwrap();
         assert_eq!(mapped.kind, TorchvisionKind::ResNet);
         let model = MaskRcnnConfig::new(18, 1).with_width_mult(0.125).init(&dev);
@@ -136,7 +140,7 @@ fn maskrcnn_state_dict_gives_torchvision_features_rpn_and_heads() {
     let dev = Device::flex();
     let r = reference();
     let path = fixture("maskrcnn_r50_w8.pth");
-    let (det, note) = load_init(Detector::MaskRcnn(fixture_maskrcnn(&dev)), &path, &dev).unwrap();
+    let (det, note) = init_from(fixture_config(), &path, &dev).unwrap();
     eprintln!("{note}");
     assert!(
         note.contains("torchvision Mask R-CNN (2 classes with background)"),
@@ -207,9 +211,8 @@ fn other_class_counts_reinitialise_the_predictors_and_mismatches_name_the_key() 
         .with_mask(MaskHeadConfig {
             conv_dim: 16,
             ..p.mask.clone()
-        })
-        .init(&dev);
-    let (_, note) = load_init(Detector::MaskRcnn(m3), &path, &dev).unwrap();
+        });
+    let (_, note) = init_from(m3, &path, &dev).unwrap();
     assert!(
         note.contains("6 tensors keep their fresh initialisation"),
         "{note}"
@@ -223,10 +226,10 @@ fn other_class_counts_reinitialise_the_predictors_and_mismatches_name_the_key() 
     }
 
     // The ResNet-18 file into an R50 Mask R-CNN: the first stage block differs.
-    let r50 = MaskRcnnConfig::new(50, 1).with_width_mult(0.125).init(&dev);
+    let r50 = MaskRcnnConfig::new(50, 1).with_width_mult(0.125);
     let e = format!(
         "{:#}",
-        load_init(Detector::MaskRcnn(r50), &fixture("resnet18_w8.pth"), &dev).unwrap_err()
+        init_from(r50, &fixture("resnet18_w8.pth"), &dev).unwrap_err()
     );
     assert!(e.contains("resnet18_w8.pth"), "{e}");
     assert!(
@@ -234,10 +237,10 @@ fn other_class_counts_reinitialise_the_predictors_and_mismatches_name_the_key() 
         "{e}"
     );
     // The same file at the wrong width names the stem.
-    let wide = MaskRcnnConfig::new(18, 1).with_width_mult(0.25).init(&dev);
+    let wide = MaskRcnnConfig::new(18, 1).with_width_mult(0.25);
     let e = format!(
         "{:#}",
-        load_init(Detector::MaskRcnn(wide), &fixture("resnet18_w8.pth"), &dev).unwrap_err()
+        init_from(wide, &fixture("resnet18_w8.pth"), &dev).unwrap_err()
     );
     assert!(
         e.contains("backbone.stem.conv.weight (file key conv1.weight)")
@@ -257,22 +260,13 @@ fn other_class_counts_reinitialise_the_predictors_and_mismatches_name_the_key() 
     ] {
         let p = dir.join(name);
         std::fs::write(&p, &b).unwrap();
-        let m = fixture_maskrcnn(&dev);
-        let e = format!(
-            "{:#}",
-            load_init(Detector::MaskRcnn(m), &p, &dev).unwrap_err()
-        );
+        let e = format!("{:#}", init_from(fixture_config(), &p, &dev).unwrap_err());
         assert!(e.contains(name), "{name}: {e}");
         eprintln!("{name}: {e}");
     }
     let e = format!(
         "{:#}",
-        load_init(
-            Detector::MaskRcnn(fixture_maskrcnn(&dev)),
-            &dir.join("missing.pth"),
-            &dev
-        )
-        .unwrap_err()
+        init_from(fixture_config(), &dir.join("missing.pth"), &dev).unwrap_err()
     );
     assert!(
         e.contains("missing.pth") && e.contains("cannot read"),
@@ -290,9 +284,8 @@ fn full_size_torchvision_state_dicts_fit() {
     let dir = PathBuf::from(std::env::var("CHICKTRAIN_TV_FULL").expect("CHICKTRAIN_TV_FULL=DIR"));
     let dev = Device::flex();
     for depth in [18, 34, 50, 101] {
-        let m = MaskRcnnConfig::new(depth, 1).init(&dev);
-        let (_, note) = load_init(
-            Detector::MaskRcnn(m),
+        let (_, note) = init_from(
+            MaskRcnnConfig::new(depth, 1),
             &dir.join(format!("resnet{depth}.pth")),
             &dev,
         )
@@ -303,16 +296,16 @@ fn full_size_torchvision_state_dicts_fit() {
             "{note}"
         );
     }
-    let (_, note) = load_init(
-        Detector::MaskRcnn(MaskRcnnConfig::paper(50, 1).init(&dev)),
+    let (_, note) = init_from(
+        MaskRcnnConfig::paper(50, 1),
         &dir.join("maskrcnn_resnet50_fpn_2.pth"),
         &dev,
     )
     .unwrap();
     eprintln!("{note}");
     assert!(!note.contains("fresh initialisation"), "{note}");
-    let (_, note) = load_init(
-        Detector::MaskRcnn(MaskRcnnConfig::paper(50, 1).init(&dev)),
+    let (_, note) = init_from(
+        MaskRcnnConfig::paper(50, 1),
         &dir.join("maskrcnn_resnet50_fpn_91.pth"),
         &dev,
     )
@@ -336,12 +329,12 @@ fn corrupted_files_are_errors_not_panics() {
         ("resnet18_w8.safetensors", true),
     ] {
         let good = std::fs::read(fixture(file)).unwrap();
+        let dir = std::env::temp_dir().join(format!("ct-tvcorrupt-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let damaged = dir.join(file);
         let read = |b: &[u8]| {
-            if safet {
-                weights::safetensors::read(b).map(|_| ())
-            } else {
-                weights::pytorch::read(b).map(|_| ())
-            }
+            std::fs::write(&damaged, b).unwrap();
+            weights::read_file(&damaged, &[]).map(|_| ())
         };
         let mut errors = 0;
         for i in 0..400 {

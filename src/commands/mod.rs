@@ -1,10 +1,14 @@
 //! Every command of the binary, as a library function that returns the text to print
 //! (so tests call them directly; `main.rs` only parses flags): [`data`] (render,
-//! convert, coco-eval, render/COCO benches), [`train`] (train, eval, predict) and
-//! [`bench`] (model bench, ablation, sweep).
+//! convert, coco-eval, render/COCO benches), [`train`] (train, eval, predict),
+//! [`export`] (weights out) and [`bench`] (model bench, ablation, sweep).
 
 #[cfg(feature = "train")]
 pub mod bench;
 pub mod data;
+#[cfg(feature = "train")]
+pub mod export;
+#[cfg(feature = "train")]
+pub mod export_safetensors;
 #[cfg(feature = "train")]
 pub mod train;

@@ -6,7 +6,7 @@
 //! |---|---|---|
 //! | chicktrain checkpoint (`.bpk`, either family) | same family | its `ema` weights (what it evaluates and ships), every tensor; with another class count the class-dependent ones are re-initialised and named |
 //! | PyTorch zip / safetensors | Mask R-CNN | a torchvision ImageNet ResNet (backbone) or `maskrcnn_resnet50_fpn` state dict ([`torchvision`]) |
-//! | PyTorch zip / safetensors | YOLO | the ultralytics importer (not in this branch) |
+//! | PyTorch zip / safetensors | YOLO | an ultralytics checkpoint or state dict ([`ultralytics`]); the class head is re-initialised for another class count, the mask head for a detection checkpoint |
 //!
 //! `--resume` ignores `model.init`: the run's `last.bpk` wins.
 
@@ -18,14 +18,20 @@ use burn::tensor::Device;
 
 use crate::model::maskrcnn::{self, torchvision};
 use crate::model::weights::{self, Applied, Format};
-use crate::model::yolo;
+use crate::model::yolo::{self, ultralytics};
 
 use super::checkpoint::Checkpoint;
-use super::detector::Detector;
+use super::detector::{Detector, DetectorConfig};
 
 /// `model`, with the weights of `path` loaded; the second value says what was loaded
-/// (printed by the trainer). `device` builds the source model of a checkpoint.
-pub fn load_init(model: Detector, path: &Path, device: &Device) -> Result<(Detector, String)> {
+/// (printed by the trainer). `config` is `model`'s own (the ultralytics mapping needs
+/// its scale and width); `device` builds the source model of a checkpoint.
+pub fn load_init(
+    model: Detector,
+    config: &DetectorConfig,
+    path: &Path,
+    device: &Device,
+) -> Result<(Detector, String)> {
     let origin = format!("model.init {}", path.display());
     let bytes = std::fs::read(path).with_context(|| format!("{origin}: cannot read the file"))?;
     let Some(format) = weights::sniff(&bytes) else {
@@ -83,11 +89,8 @@ pub fn load_init(model: Detector, path: &Path, device: &Device) -> Result<(Detec
             (model, applied, what)
         }
         (Format::TorchLegacy | Format::TorchZip | Format::Safetensors, Detector::MaskRcnn(m)) => {
-            let tensors = match format {
-                Format::Safetensors => weights::safetensors::read(&bytes),
-                _ => weights::pytorch::read(&bytes),
-            }
-            .with_context(|| origin.clone())?;
+            let tensors = weights::read_file(path, &["model", "state_dict"])
+                .with_context(|| origin.clone())?;
             let nc = m.num_classes();
             let mapped =
                 torchvision::map_state_dict(tensors, nc).with_context(|| origin.clone())?;
@@ -114,13 +117,27 @@ pub fn load_init(model: Detector, path: &Path, device: &Device) -> Result<(Detec
             )?;
             (Detector::MaskRcnn(m), a, what)
         }
-        // MERGE POINT (branch `ultra`): ultralytics `.pt` / safetensors → YOLO snapshots,
-        // then `weights::apply(m, snapshots, &yolo::class_dependent, &origin)` as above.
-        (Format::TorchLegacy | Format::TorchZip | Format::Safetensors, Detector::Yolo(_)) => {
-            bail!(
-                "{origin}: ultralytics import not built in this branch (a {} for a YOLO model); start from a chicktrain checkpoint instead",
-                format.name()
-            )
+        (Format::TorchLegacy | Format::TorchZip | Format::Safetensors, Detector::Yolo(m)) => {
+            // ultralytics `.pt` (its `ema`, else `model`), a state dict or safetensors under
+            // ultralytics' key names; a detection checkpoint has no mask head, which keeps its
+            // fresh init like a class head of another class count.
+            let DetectorConfig::Yolo(cfg) = config else {
+                bail!("{origin}: the model config is not a YOLO config");
+            };
+            let w = ultralytics::read_ultralytics(path, cfg).with_context(|| origin.clone())?;
+            if !w.missing.is_empty() {
+                fresh_why =
+                    "a class count that differs, or a detection checkpoint without a mask head";
+            }
+            let what = format!(
+                "{}, ultralytics ({} classes)",
+                format.name(),
+                w.file_classes
+            );
+            let missing: std::collections::HashSet<String> = w.missing.iter().cloned().collect();
+            let keep = |p: &str| yolo::class_dependent(p) || missing.contains(p);
+            let (m, a) = weights::apply(m, w.snapshots, &keep, &origin)?;
+            (Detector::Yolo(m), a, what)
         }
     };
     Ok((model, describe(path, &what, &applied, fresh_why)))

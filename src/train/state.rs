@@ -56,7 +56,7 @@ impl TrainState {
         let Some(ck) = resume else {
             let mut model = mcfg.init(ad);
             if let Some(p) = cfg.model.init() {
-                let (m, note) = load_init(model, Path::new(p), base)?;
+                let (m, note) = load_init(model, &mcfg, Path::new(p), base)?;
                 say(note);
                 model = m;
             }

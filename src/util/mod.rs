@@ -1,10 +1,15 @@
 //! Small helpers shared across stages, one concept per file: atomic writes (here),
 //! stable hashing ([`hash`]), PNG encoding ([`png`]), progress bars ([`progress`]),
-//! summary statistics ([`stats`]) and host copies of tensors ([`tensor`], feature `train`).
+//! summary statistics ([`stats`]), host copies of tensors ([`tensor`], feature `train`), and
+//! weights files of other frameworks as host state dicts ([`state_dict`]: PyTorch `.pt` via
+//! [`pytorch`], [`safetensors`]).
 
 pub mod hash;
 pub mod png;
 pub mod progress;
+pub mod pytorch;
+pub mod safetensors;
+pub mod state_dict;
 pub mod stats;
 #[cfg(feature = "train")]
 pub mod tensor;

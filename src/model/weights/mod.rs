@@ -3,20 +3,20 @@
 //! chicktrain's own module paths — exactly the names [`collect`] gives, `backbone.l0.conv.weight`
 //! — and [`apply`] loads them into a model, checking every shape.
 //!
-//! Readers: [`pytorch`] (`torch.save` zip files), [`safetensors`]; a chicktrain checkpoint
-//! goes through [`collect`] on the model it holds. Key mapping from another framework's names
+//! Readers: [`read_file`] (`torch.save` zip files and safetensors, through
+//! `util::{pytorch, safetensors}`, the readers the ultralytics importer uses too); a
+//! chicktrain checkpoint goes through [`collect`] on the model it holds. Key mapping from another framework's names
 //! lives beside the model it describes (`maskrcnn::torchvision`). [`sniff`] tells the
 //! formats apart by their first bytes, never by the extension.
 
-pub mod pickle;
-pub mod pytorch;
-pub mod safetensors;
-
 use std::collections::{HashMap, HashSet};
+use std::path::Path;
 
 use anyhow::{bail, Result};
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::tensor::{DType, Tensor, TensorData};
+
+use crate::util::state_dict::{read_state_dict, HostData};
 
 /// One named tensor: burn-store's `TensorSnapshot` (`burn_pack::Tensor`), so a store from
 /// burn-store can feed [`apply`] unchanged.
@@ -84,6 +84,25 @@ pub fn snapshot_data(s: Snapshot) -> Result<TensorData> {
         DType::F16 | DType::BF16 | DType::F64 => data.convert::<f32>(),
         d => bail!("tensor {name}: dtype {d:?} is not a float type"),
     })
+}
+
+/// The tensors of a PyTorch (`torch.save`) or safetensors file under the file's own key
+/// names, floats as f32 and integers (BatchNorm `num_batches_tracked`) as i64. In a
+/// checkpoint dict the first entry of `prefer` that holds weights is read (see
+/// [`read_state_dict`]).
+pub fn read_file(path: &Path, prefer: &[&str]) -> Result<Vec<Snapshot>> {
+    let sd = read_state_dict(path, prefer)?;
+    Ok(sd
+        .tensors
+        .into_iter()
+        .map(|(name, t)| match t.data {
+            HostData::F32(v) => snapshot_f32(name, v, t.shape),
+            HostData::I64(v) => {
+                let (bytes, shape, dtype) = TensorData::new(v, t.shape).into_parts();
+                Snapshot::new(name, dtype, shape, None, bytes)
+            }
+        })
+        .collect())
 }
 
 /// A snapshot of f32 host values.
@@ -313,7 +332,9 @@ mod tests {
         // Enum variants are path segments, as in burn-store's `collect(None, None, false)`:
         // the names an importer must produce.
         assert!(
-            snaps.iter().any(|s| s.name.starts_with("backbone.l2.m.0.Bottleneck.")),
+            snaps
+                .iter()
+                .any(|s| s.name.starts_with("backbone.l2.m.0.Bottleneck.")),
             "{:?}",
             snaps.iter().map(|s| &s.name).collect::<Vec<_>>()
         );

@@ -4,6 +4,8 @@
 //! - [`assigner`]: task-aligned assigner (plain Rust over host vectors, no gradients).
 //! - [`loss`]: BCE class, CIoU + DFL box and prototype mask losses ([`loss::yolo_loss`]).
 //! - [`postprocess`]: decoding, class-wise NMS and mask assembly for inference.
+//! - [`ultralytics`]: ultralytics `state_dict` names ↔ ours, weights in (`.pt`, safetensors)
+//!   and out.
 //!
 //! This module defines the model config ([`YoloSegConfig`]), the model ([`YoloSeg`]) and its
 //! output ([`YoloOutput`]). It reads no training config.
@@ -17,6 +19,7 @@ pub mod loss;
 pub mod neck;
 pub mod postprocess;
 pub mod scale;
+pub mod ultralytics;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
