@@ -32,8 +32,9 @@ impl Letterbox {
     pub fn new(orig: (u32, u32), size: u32) -> Letterbox {
         let (w, h) = (orig.0.max(1), orig.1.max(1));
         let scale = size as f64 / w.max(h) as f64;
-        let iw = ((w as f64 * scale).round() as u32).clamp(1, size);
-        let ih = ((h as f64 * scale).round() as u32).clamp(1, size);
+        // Python's round (ties to even), as ultralytics' LetterBox and scale_boxes.
+        let iw = ((w as f64 * scale).round_ties_even() as u32).clamp(1, size);
+        let ih = ((h as f64 * scale).round_ties_even() as u32).clamp(1, size);
         Letterbox {
             orig: (w, h),
             size,
@@ -96,6 +97,20 @@ impl Letterbox {
     /// A box `[x1, y1, x2, y2]` at the network input → `[x, y, w, h]` in the original
     /// image, clipped to it.
     pub fn unbox(&self, b: [f64; 4]) -> [f64; 4] {
+        let ([x1, y1, x2, y2], sx, sy) = self.clip_inner(b);
+        [x1 * sx, y1 * sy, (x2 - x1) * sx, (y2 - y1) * sy]
+    }
+
+    /// [`Self::unbox`] as `[x1, y1, x2, y2]` (ultralytics' `scale_boxes`: the padding
+    /// subtracted, scaled by the gain of each axis, clipped to the image).
+    pub fn unbox_xyxy(&self, b: [f64; 4]) -> [f64; 4] {
+        let ([x1, y1, x2, y2], sx, sy) = self.clip_inner(b);
+        [x1 * sx, y1 * sy, x2 * sx, y2 * sy]
+    }
+
+    /// An input box relative to the resized image and clipped to it, and the scales of
+    /// the two axes back to the original.
+    fn clip_inner(&self, b: [f64; 4]) -> ([f64; 4], f64, f64) {
         let (w, h) = (self.orig.0 as f64, self.orig.1 as f64);
         let sx = w / self.inner.0 as f64;
         let sy = h / self.inner.1 as f64;
@@ -105,7 +120,7 @@ impl Letterbox {
         let y1 = (b[1] - py).clamp(0.0, ih);
         let x2 = (b[2] - px).clamp(0.0, iw);
         let y2 = (b[3] - py).clamp(0.0, ih);
-        [x1 * sx, y1 * sy, (x2 - x1) * sx, (y2 - y1) * sy]
+        ([x1, y1, x2, y2], sx, sy)
     }
 }
 
