@@ -124,7 +124,7 @@ fn tiny_model_learns_on_flex() {
     let dets = eval.forward_infer(x);
     assert_eq!(dets.len(), BATCH);
     for d in dets.iter().flatten() {
-        assert_eq!(d.mask.len(), SIZE * SIZE);
+        assert_eq!(d.input_mask([SIZE, SIZE]).len(), SIZE * SIZE);
         assert!(d.score > 0.05 && d.score <= 1.0 && d.class == 0);
         assert!(
             d.bbox[2] > 0.0
@@ -198,7 +198,7 @@ fn to_coco(targets: &[ImageTargets], dets: &[Vec<Detection>]) -> (CocoDataset, V
                 category_id: x.class as u64 + 1,
                 score: x.score as f64,
                 bbox: Some(x.bbox.map(|v| v as f64)),
-                segmentation: Some(Segmentation::Uncompressed(rle(&x.mask))),
+                segmentation: Some(Segmentation::Uncompressed(rle(&x.input_mask([SIZE, SIZE])))),
             });
         }
     }

@@ -79,15 +79,16 @@ fn tiny_model_learns_on_flex() {
     assert_eq!(dets.len(), BATCH);
     let (mut found, mut total) = (0, 0);
     for (img, d) in targets.images.iter().zip(&dets) {
-        for det in d {
-            assert_eq!(det.mask.len(), SIZE * SIZE);
+        let masks: Vec<Vec<u8>> = d.iter().map(|det| det.input_mask([SIZE, SIZE])).collect();
+        for (det, m) in d.iter().zip(&masks) {
+            assert_eq!(m.len(), SIZE * SIZE);
             assert!(det.bbox.iter().all(|v| v.is_finite()));
         }
         for gt in &img.masks {
             total += 1;
-            let best = d
+            let best = masks
                 .iter()
-                .map(|det| mask_iou(&det.mask, gt))
+                .map(|m| mask_iou(m, gt))
                 .fold(0.0, f32::max);
             found += usize::from(best >= 0.5);
         }

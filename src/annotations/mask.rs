@@ -62,6 +62,50 @@ impl Mask {
     }
 }
 
+/// A mask of a `width × height` image that is background outside one window: what a
+/// detection decodes to at the original image size. Decoding only inside the box keeps
+/// validation from building hundreds of full-image masks per image; the RLE is built
+/// from the window directly ([`crate::annotations::rle::Rle::encode_cropped`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CroppedMask {
+    /// Size of the whole image.
+    pub width: u32,
+    pub height: u32,
+    /// Top-left corner of the window in the image.
+    pub x0: u32,
+    pub y0: u32,
+    /// The window's pixels; it must lie inside the image.
+    pub window: Mask,
+}
+
+impl CroppedMask {
+    /// An all-background mask of a `width × height` image.
+    pub fn empty(width: u32, height: u32) -> CroppedMask {
+        CroppedMask {
+            width,
+            height,
+            x0: 0,
+            y0: 0,
+            window: Mask::new(0, 0),
+        }
+    }
+
+    /// The whole-image mask.
+    pub fn full(&self) -> Mask {
+        let mut out = Mask::new(self.height, self.width);
+        let (ww, wh) = (self.window.width as usize, self.window.height as usize);
+        for y in 0..wh {
+            let dst = (self.y0 as usize + y) * self.width as usize + self.x0 as usize;
+            out.data[dst..dst + ww].copy_from_slice(&self.window.data[y * ww..(y + 1) * ww]);
+        }
+        out
+    }
+
+    pub fn area(&self) -> u64 {
+        self.window.area()
+    }
+}
+
 /// Resizes a mask with nearest-neighbour sampling (pixel centres).
 pub fn resize_mask(m: &Mask, width: u32, height: u32) -> Mask {
     if m.width == width && m.height == height {

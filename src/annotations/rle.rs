@@ -5,7 +5,7 @@
 //! `rleFrString`, `rleMerge`, `rleArea`, `rleToBbox`, `rleIou`, `bbIou`), including the
 //! unsigned wrap-arounds, so that areas, boxes and IoUs agree bit for bit.
 
-use super::mask::Mask;
+use super::mask::{CroppedMask, Mask};
 
 /// Why an RLE could not be read.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -52,6 +52,48 @@ impl Rle {
         Rle {
             height: mask.height,
             width: mask.width,
+            counts,
+        }
+    }
+
+    /// The same runs as `encode(&m.full())`, walking only the window's columns: the
+    /// columns left and right of it and the rows above and below it are background runs.
+    pub fn encode_cropped(m: &CroppedMask) -> Rle {
+        let (h, w) = (m.height as u64, m.width as u64);
+        let (ww, wh) = (m.window.width as usize, m.window.height as usize);
+        assert!(
+            m.x0 as u64 + ww as u64 <= w && m.y0 as u64 + wh as u64 <= h,
+            "encode_cropped: window {ww}×{wh} at ({}, {}) leaves the {w}×{h} image",
+            m.x0,
+            m.y0
+        );
+        let mut counts = Vec::new();
+        let (mut prev, mut run) = (false, 0u64);
+        let mut push = |v: bool, n: u64| {
+            if n == 0 {
+                return;
+            }
+            if v != prev {
+                counts.push(run as u32);
+                run = 0;
+                prev = v;
+            }
+            run += n;
+        };
+        push(false, m.x0 as u64 * h);
+        let below = h - m.y0 as u64 - wh as u64;
+        for x in 0..ww {
+            push(false, m.y0 as u64);
+            for y in 0..wh {
+                push(m.window.data[y * ww + x] != 0, 1);
+            }
+            push(false, below);
+        }
+        push(false, (w - m.x0 as u64 - ww as u64) * h);
+        counts.push(run as u32);
+        Rle {
+            height: m.height,
+            width: m.width,
             counts,
         }
     }
@@ -359,6 +401,47 @@ mod tests {
         };
         assert_eq!(rle.to_compressed(), "52203");
         assert_eq!(Rle::from_compressed("52203", 4, 4).unwrap(), rle);
+    }
+
+    #[test]
+    fn cropped_encoding_equals_encoding_the_full_mask() {
+        // Windows at every edge, empty and full windows, and a 0-pixel window; pixels from
+        // a fixed-seed LCG.
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut bit = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 61) & 1 == 1
+        };
+        let (w, h) = (9u32, 7u32);
+        for (x0, y0, ww, wh) in [
+            (0, 0, 9, 7),
+            (0, 0, 3, 2),
+            (6, 5, 3, 2),
+            (2, 1, 4, 5),
+            (8, 0, 1, 7),
+            (0, 6, 9, 1),
+            (4, 3, 0, 0),
+        ] {
+            for fill in [None, Some(0u8), Some(1u8)] {
+                let data = (0..ww * wh)
+                    .map(|_| fill.unwrap_or_else(|| bit() as u8))
+                    .collect();
+                let c = CroppedMask {
+                    width: w,
+                    height: h,
+                    x0,
+                    y0,
+                    window: Mask::from_row_major(wh, ww, data).unwrap(),
+                };
+                let full = c.full();
+                assert_eq!(Rle::encode_cropped(&c), Rle::encode(&full), "{x0} {y0} {ww} {wh}");
+                assert_eq!(c.area(), full.area());
+            }
+        }
+        assert_eq!(
+            Rle::encode_cropped(&CroppedMask::empty(5, 3)),
+            Rle::encode(&Mask::new(3, 5))
+        );
     }
 
     #[test]

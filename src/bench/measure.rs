@@ -6,7 +6,9 @@
 //! - **latency**: batch-1 forward pass until the outputs are on the host, after warm-up
 //!   runs; YOLO with BatchNorm folded (as deployed), its box decoding and NMS excluded
 //!   (ultralytics' "inference" time); Mask R-CNN's `forward_infer`, which includes its
-//!   proposal, box and mask stages. Median, 10th and 90th percentile.
+//!   proposal, box and mask-head stages (up to the 28×28 mask probabilities; pasting them
+//!   into the image is the caller's, as decoding YOLO's masks is). Median, 10th and 90th
+//!   percentile.
 //! - **training throughput**: images/s of full steps at batch 8 — forward, the real loss
 //!   (task-aligned assigner + losses for YOLO; RPN + RoI losses for Mask R-CNN),
 //!   backward, SGD step — on procedural scenes with 6 objects per image, median step.
@@ -234,7 +236,7 @@ fn time_yolo(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Res
     })
 }
 
-/// A Mask R-CNN variant: batch-1 `forward_infer` (proposals, boxes and masks), then
+/// A Mask R-CNN variant: batch-1 `forward_infer` (proposals, boxes, mask probabilities), then
 /// training steps with the RPN + RoI losses.
 fn time_maskrcnn(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Result<Timed> {
     let Inputs {

@@ -69,7 +69,7 @@ pub fn eval_cmd(
         return Ok(serde_json::to_string(&StatsRecord::from(&s.stats))?);
     }
     Ok(format!(
-        "{} (epoch {}) on the {:?} split of {}, {} images{}:\n{}\n{}",
+        "{} (epoch {}) on the {:?} split of {}, {} images{}:\n{}\n{}\n{}",
         checkpoint.display(),
         s.epoch,
         split,
@@ -81,7 +81,8 @@ pub fn eval_cmd(
             ""
         },
         stats_line("bbox", &s.stats.bbox),
-        stats_line("segm", &s.stats.segm)
+        stats_line("segm", &s.stats.segm),
+        s.timing.line()
     ))
 }
 

@@ -69,6 +69,12 @@ pub struct TrainConfig {
     /// eval mode. 0 = train everything.
     #[serde(default)]
     pub freeze: usize,
+    /// Validate every N epochs, and always after the last one (detectron2's
+    /// `TEST.EVAL_PERIOD`; N = `epochs` is ultralytics' `val=False`). Validation costs
+    /// inference over the val images, so on a CPU a short-epoch run spends much of its
+    /// time there; `best.bpk` is chosen among the validated epochs only.
+    #[serde(default = "default_val_every")]
+    pub val_every: usize,
 }
 
 fn default_epochs() -> usize {
@@ -110,6 +116,9 @@ fn default_fliplr() -> f64 {
 fn default_hsv() -> [f64; 3] {
     [0.015, 0.7, 0.4]
 }
+fn default_val_every() -> usize {
+    1
+}
 
 impl Default for TrainConfig {
     fn default() -> Self {
@@ -126,6 +135,11 @@ impl TrainConfig {
         }
         if t.batch == 0 {
             bail!("train.batch must be at least 1");
+        }
+        if t.val_every == 0 {
+            bail!(
+                "train.val_every must be at least 1 (1 validates every epoch; train.epochs validates only after the last)"
+            );
         }
         for (k, v) in [("train.lr", t.lr), ("train.lrf", t.lrf)] {
             if !(v.is_finite() && v > 0.0) {
@@ -165,4 +179,20 @@ impl TrainConfig {
 
 fn default_true() -> bool {
     true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn val_every_defaults_to_every_epoch_and_rejects_zero() {
+        assert_eq!(TrainConfig::default().val_every, 1);
+        let t: TrainConfig = toml::from_str("val_every = 5").unwrap();
+        assert_eq!(t.val_every, 5);
+        t.validate().unwrap();
+        let t: TrainConfig = toml::from_str("val_every = 0").unwrap();
+        let e = t.validate().unwrap_err().to_string();
+        assert!(e.contains("train.val_every must be at least 1"), "{e}");
+    }
 }

@@ -1,7 +1,8 @@
 //! Letterboxing: an image of any shape into the network's square input without
 //! distorting it (scale the long side to the input, pad the short side with grey 114,
-//! centred, as ultralytics does), and the inverse that maps boxes and masks predicted on
-//! the square input back to the original image.
+//! centred, as ultralytics does), and the inverse that maps boxes predicted on the square
+//! input back to the original image (masks are decoded at the original size from the
+//! model's soft output: `model::instance_mask`).
 //!
 //! Why not stretch: users' line photos are 4:3 or 16:9; stretching them to a square makes
 //! carcasses look thinner or fatter than any synthetic render, a domain gap the synthetic
@@ -32,8 +33,9 @@ impl Letterbox {
     pub fn new(orig: (u32, u32), size: u32) -> Letterbox {
         let (w, h) = (orig.0.max(1), orig.1.max(1));
         let scale = size as f64 / w.max(h) as f64;
-        let iw = ((w as f64 * scale).round() as u32).clamp(1, size);
-        let ih = ((h as f64 * scale).round() as u32).clamp(1, size);
+        // Python's round (ties to even), as ultralytics' LetterBox and scale_boxes.
+        let iw = ((w as f64 * scale).round_ties_even() as u32).clamp(1, size);
+        let ih = ((h as f64 * scale).round_ties_even() as u32).clamp(1, size);
         Letterbox {
             orig: (w, h),
             size,
@@ -74,28 +76,23 @@ impl Letterbox {
         out
     }
 
-    /// A mask predicted at the network input, back at the original image size: the
-    /// padding is cut off, then the rest is resized.
-    pub fn unmask(&self, m: &Mask) -> Mask {
-        let (iw, ih) = self.inner;
-        let inner = if (iw, ih) == (m.width, m.height) {
-            m.clone()
-        } else {
-            let mut c = Mask::new(ih, iw);
-            for y in 0..ih.min(m.height.saturating_sub(self.pad.1)) {
-                let src = ((y + self.pad.1) * m.width + self.pad.0) as usize;
-                let n = iw.min(m.width.saturating_sub(self.pad.0)) as usize;
-                let dst = (y * iw) as usize;
-                c.data[dst..dst + n].copy_from_slice(&m.data[src..src + n]);
-            }
-            c
-        };
-        resize_mask(&inner, self.orig.0, self.orig.1)
-    }
-
     /// A box `[x1, y1, x2, y2]` at the network input → `[x, y, w, h]` in the original
     /// image, clipped to it.
     pub fn unbox(&self, b: [f64; 4]) -> [f64; 4] {
+        let ([x1, y1, x2, y2], sx, sy) = self.clip_inner(b);
+        [x1 * sx, y1 * sy, (x2 - x1) * sx, (y2 - y1) * sy]
+    }
+
+    /// [`Self::unbox`] as `[x1, y1, x2, y2]` (ultralytics' `scale_boxes`: the padding
+    /// subtracted, scaled by the gain of each axis, clipped to the image).
+    pub fn unbox_xyxy(&self, b: [f64; 4]) -> [f64; 4] {
+        let ([x1, y1, x2, y2], sx, sy) = self.clip_inner(b);
+        [x1 * sx, y1 * sy, x2 * sx, y2 * sy]
+    }
+
+    /// An input box relative to the resized image and clipped to it, and the scales of
+    /// the two axes back to the original.
+    fn clip_inner(&self, b: [f64; 4]) -> ([f64; 4], f64, f64) {
         let (w, h) = (self.orig.0 as f64, self.orig.1 as f64);
         let sx = w / self.inner.0 as f64;
         let sy = h / self.inner.1 as f64;
@@ -105,7 +102,7 @@ impl Letterbox {
         let y1 = (b[1] - py).clamp(0.0, ih);
         let x2 = (b[2] - px).clamp(0.0, iw);
         let y2 = (b[3] - py).clamp(0.0, ih);
-        [x1 * sx, y1 * sy, (x2 - x1) * sx, (y2 - y1) * sy]
+        ([x1, y1, x2, y2], sx, sy)
     }
 }
 
@@ -124,7 +121,6 @@ mod tests {
         let mut m = Mask::new(100, 100);
         m.data[55 * 100 + 30] = 1;
         assert_eq!(lb.mask(&m), resize_mask(&m, 64, 64));
-        assert_eq!(lb.unmask(&lb.mask(&m)), resize_mask(&lb.mask(&m), 100, 100));
         let b = lb.unbox([16.0, 8.0, 48.0, 64.0]);
         let s = 100.0 / 64.0;
         assert_eq!(b, [16.0 * s, 8.0 * s, 32.0 * s, 56.0 * s]);
@@ -142,7 +138,7 @@ mod tests {
         assert_eq!(out.get_pixel(5, 3).0, [PAD_GREY; 3]);
         assert_eq!(out.get_pixel(5, 60).0, [PAD_GREY; 3]);
         assert_eq!(out.get_pixel(5, 30).0, [10, 200, 30]);
-        // A rectangle mask keeps its aspect and goes back to the same pixels.
+        // A rectangle mask keeps its aspect: 100 × 50 px at (50, 25) → 32 × 16 at (16, 24).
         let mut m = Mask::new(100, 200);
         for y in 25..75 {
             for x in 50..150 {
@@ -152,9 +148,7 @@ mod tests {
         let small = lb.mask(&m);
         assert_eq!((small.width, small.height), (64, 64));
         assert_eq!(small.area(), 32 * 16);
-        let back = lb.unmask(&small);
-        assert_eq!((back.width, back.height), (200, 100));
-        assert_eq!(back.data, m.data);
+        assert!(small.get(16, 24) && small.get(47, 39) && !small.get(15, 24) && !small.get(16, 40));
         // The box around it maps back to the original box.
         let b = lb.unbox([16.0, 16.0 + 8.0, 48.0, 16.0 + 24.0]);
         for (got, want) in b.iter().zip([50.0, 25.0, 100.0, 50.0]) {
@@ -172,6 +166,7 @@ mod tests {
         let lb = Letterbox::new((1, 1000), 64);
         assert_eq!(lb.inner, (1, 64));
         let m = Mask::new(1000, 1);
-        assert_eq!(lb.unmask(&lb.mask(&m)).data.len(), 1000);
+        assert_eq!(lb.mask(&m).data.len(), 64 * 64);
+        assert_eq!(lb.unbox([0.0, 0.0, 64.0, 64.0]), [0.0, 0.0, 1.0, 1000.0]);
     }
 }

@@ -1,6 +1,10 @@
 //! What every model family predicts ([`Detection`]) and the box arithmetic both
 //! postprocesses share: IoU of two boxes and greedy NMS.
 
+use crate::annotations::mask::CroppedMask;
+
+pub use super::instance_mask::MaskSource;
+
 /// Offset that separates classes in the coordinate space of class-wise NMS (ultralytics'
 /// `max_wh`).
 pub const MAX_WH: f32 = 7680.0;
@@ -14,8 +18,27 @@ pub struct Detection {
     pub bbox: [f32; 4],
     pub score: f32,
     pub class: usize,
-    /// Row-major `H × W` at the input size, 1 inside the instance.
-    pub mask: Vec<u8>,
+    /// What the mask decodes from; [`Detection::mask_in`] decodes it at any image size.
+    pub mask: MaskSource,
+}
+
+impl Detection {
+    /// The box as xyxy input pixels.
+    pub fn xyxy(&self) -> [f32; 4] {
+        let b = self.bbox;
+        [b[0], b[1], b[0] + b[2], b[1] + b[3]]
+    }
+
+    /// The mask in an image of `(width, height)` pixels whose xyxy box is `bx` (the
+    /// original image and the box mapped to it, or the input and [`Self::xyxy`]).
+    pub fn mask_in(&self, image: (u32, u32), bx: [f32; 4]) -> CroppedMask {
+        self.mask.decode(image, bx)
+    }
+
+    /// Row-major `h × w` mask at a `[h, w]` network input, 1 inside the instance.
+    pub fn input_mask(&self, [h, w]: [usize; 2]) -> Vec<u8> {
+        self.mask_in((w as u32, h as u32), self.xyxy()).full().data
+    }
 }
 
 /// IoU of two xyxy boxes (no +1, no eps: zero-area pairs give 0).

@@ -3,7 +3,8 @@
 //! - [`yolo`]: the YOLO11-seg-style one-stage model (its blocks, task-aligned assigner,
 //!   losses and postprocess).
 //! - [`maskrcnn`]: the two-stage Mask R-CNN (ResNet-FPN, RPN, RoIAlign, box and mask heads).
-//! - Shared by both: [`detection`] (what a model predicts, box IoU, NMS), [`layers`]
+//! - Shared by both: [`detection`] (what a model predicts, box IoU, NMS),
+//!   [`instance_mask`] (a detection's mask, decoded at the input or the original size), [`layers`]
 //!   (parameter and MAC counts, upsampling), [`loss`] (overflow-free primitives) and
 //!   [`summary`] (model size).
 //! - [`weights`]: weights from files (chicktrain checkpoints, PyTorch, safetensors) as
@@ -15,6 +16,7 @@
 
 pub mod detection;
 pub mod freeze;
+pub mod instance_mask;
 pub mod layers;
 pub mod loss;
 pub mod maskrcnn;

@@ -180,14 +180,27 @@ impl Detector {
     /// Detections per image with score ≥ `conf` (call on the eval-mode, plain-device model).
     /// Mask R-CNN applies its own score threshold (`roi.score_thresh`, 0.05) first.
     pub fn predict(&self, images: Tensor<4>, conf: f32) -> Vec<Vec<Detection>> {
+        self.predict_timed(images, conf).0
+    }
+
+    /// [`Self::predict`] and the seconds of the network alone: YOLO's forward pass up to
+    /// its output tensors (box decoding and NMS excluded); Mask R-CNN's `forward_infer`
+    /// whole (its proposal, NMS and head stages interleave with the network). Wall clock
+    /// on the eager CPU backends; a lazy GPU backend would move time into the postprocess.
+    pub fn predict_timed(&self, images: Tensor<4>, conf: f32) -> (Vec<Vec<Detection>>, f64) {
+        let t = std::time::Instant::now();
         match self {
-            Detector::Yolo(m) => postprocess(&m.forward(images), conf, VAL_IOU, VAL_MAX_DET),
+            Detector::Yolo(m) => {
+                let out = m.forward(images);
+                let fwd = t.elapsed().as_secs_f64();
+                (postprocess(&out, conf, VAL_IOU, VAL_MAX_DET), fwd)
+            }
             Detector::MaskRcnn(m) => {
                 let mut out = m.forward_infer(images);
                 for d in &mut out {
                     d.retain(|x| x.score >= conf);
                 }
-                out
+                (out, t.elapsed().as_secs_f64())
             }
         }
     }

@@ -1,7 +1,8 @@
 //! `plots.png` of a run: two panels drawn with [`crate::eval::plots`]. Left, the model's
 //! training losses per epoch (mean per step; YOLO: box, cls, dfl, seg; Mask R-CNN:
 //! rpn_cls, rpn_box, cls, box, mask); right, validation
-//! bbox/segm AP and AP50 per epoch on a 0–1 axis. The numbers are in `results.csv`.
+//! bbox/segm AP and AP50 per validated epoch (`train.val_every`) on a 0–1 axis. The
+//! numbers are in `results.csv`.
 
 use std::path::Path;
 
@@ -40,11 +41,8 @@ pub fn run_panels(records: &[EpochRecord], loss_names: &[&str]) -> [Panel; 2] {
         ap = ap.push(Series::new(
             name,
             curve(&|r| {
-                let v = if t == "bbox" {
-                    &r.val.bbox
-                } else {
-                    &r.val.segm
-                };
+                let val = r.val.as_ref()?;
+                let v = if t == "bbox" { &val.bbox } else { &val.segm };
                 Some(v.stats[s])
             }),
             PALETTE[6 + i],
@@ -93,10 +91,12 @@ mod tests {
                     proxy: true,
                     time: 1.0,
                     train_time: 1.0,
-                    val: StatsRecord {
+                    // Epoch 2 was not validated (train.val_every = 2 would skip 1 and 3;
+                    // any gap must just leave its points out).
+                    val: (e != 2).then_some(StatsRecord {
                         bbox: IouStats { stats: bbox },
                         segm: IouStats { stats: segm },
-                    },
+                    }),
                 }
             })
             .collect();
@@ -104,12 +104,10 @@ mod tests {
         let [l, a] = run_panels(&recs, &names);
         assert_eq!(l.series.len(), 4);
         assert_eq!(a.series.len(), 4);
-        assert!(l
-            .series
-            .iter()
-            .chain(&a.series)
-            .all(|s| s.points.len() == 3));
-        assert_eq!(a.series[0].points[2], (3.0, 0.30000000000000004));
+        assert!(l.series.iter().all(|s| s.points.len() == 3));
+        assert!(a.series.iter().all(|s| s.points.len() == 2));
+        assert_eq!(a.series[0].points[0].0, 1.0);
+        assert_eq!(a.series[0].points[1], (3.0, 0.30000000000000004));
         let dir = std::env::temp_dir().join(format!("ct-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         write_plots(&dir, &recs, &names).unwrap();

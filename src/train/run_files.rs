@@ -60,7 +60,9 @@ pub struct EpochRecord {
     /// Seconds of training steps alone.
     #[serde(default)]
     pub train_time: f64,
-    pub val: StatsRecord,
+    /// Validation stats; absent on epochs `train.val_every` skipped.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub val: Option<StatsRecord>,
 }
 
 fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<BTreeMap<String, f64>, D::Error> {
@@ -106,14 +108,20 @@ pub fn csv_header(loss_names: &[&str]) -> String {
     h.join(",")
 }
 
-/// One `results.csv` row; a loss term the record lacks is `null`.
+/// One `results.csv` row; a loss term the record lacks, and every val column of an
+/// epoch that was not validated, is `null`.
 pub fn csv_row(r: &EpochRecord, loss_names: &[&str]) -> String {
     let mut row = vec![json(&r.epoch), json(&r.lr), json(&r.time)];
     for k in loss_names {
         row.push(r.loss.get(*k).map_or("null".into(), json));
     }
-    for s in [&r.val.bbox.stats, &r.val.segm.stats] {
-        row.extend(s.iter().map(json));
+    match &r.val {
+        Some(v) => {
+            for s in [&v.bbox.stats, &v.segm.stats] {
+                row.extend(s.iter().map(json));
+            }
+        }
+        None => row.extend(std::iter::repeat_n("null".to_string(), 24)),
     }
     row.join(",")
 }
@@ -155,12 +163,14 @@ pub fn read_metrics(dir: &Path, upto_epoch: usize) -> Result<Vec<EpochRecord>> {
     Ok(out)
 }
 
-/// The epoch of the best validation segm AP among `records` (0 when there are none).
+/// The epoch of the best validation segm AP among the validated `records` (0 when there
+/// are none).
 pub fn best_epoch(records: &[EpochRecord]) -> usize {
     records
         .iter()
-        .max_by(|a, b| a.val.segm.stats[0].total_cmp(&b.val.segm.stats[0]))
-        .map_or(0, |r| r.epoch)
+        .filter_map(|r| Some((r.epoch, r.val.as_ref()?.segm.stats[0])))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(0, |(e, _)| e)
 }
 
 /// Writes `<dir>/test.json`.
@@ -214,10 +224,10 @@ mod tests {
             proxy: true,
             time: 12.0,
             train_time: 10.0,
-            val: StatsRecord {
+            val: Some(StatsRecord {
                 bbox: IouStats { stats: [-1.0; 12] },
                 segm: IouStats { stats: segm },
-            },
+            }),
         }
     }
 
@@ -225,7 +235,8 @@ mod tests {
     fn metrics_lines_keep_the_untyped_key_order() {
         let r = record(3, 0.5);
         // What `serde_json::json!` (sorted keys) wrote before the typed record.
-        let (bbox, segm) = (r.val.bbox.stats, r.val.segm.stats);
+        let v = r.val.as_ref().unwrap();
+        let (bbox, segm) = (v.bbox.stats, v.segm.stats);
         let untyped = serde_json::json!({
             "epoch": 3, "lr": 0.01, "time": 12.0, "train_time": 10.0, "images_per_s": 6.5,
             "loss": {"seg": 0.1, "box": 1.5}, "proxy": true,
@@ -277,6 +288,19 @@ mod tests {
         nan.loss.insert("box".into(), f64::NAN);
         write_metrics(&dir, &[nan], &["box"]).unwrap();
         assert!(read_metrics(&dir, 9).unwrap()[0].loss["box"].is_nan());
+        // An epoch without validation: no `val` key, `null` val cells, never the best.
+        let mut skipped = record(5, 0.9);
+        skipped.val = None;
+        let line = json(&skipped);
+        assert!(!line.contains("val"), "{line}");
+        write_metrics(&dir, &[recs[0].clone(), skipped.clone()], &["box"]).unwrap();
+        let back = read_metrics(&dir, 9).unwrap();
+        assert_eq!(back[1], skipped);
+        assert_eq!(best_epoch(&back), 1);
+        let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+        let row: Vec<&str> = csv.lines().nth(2).unwrap().split(',').collect();
+        assert_eq!(row.len(), 3 + 1 + 24);
+        assert!(row[4..].iter().all(|c| *c == "null"), "{row:?}");
         std::fs::write(dir.join("metrics.jsonl"), "{\"epoch\": 1}\n").unwrap();
         let e = format!("{:#}", read_metrics(&dir, 9).unwrap_err());
         assert!(e.contains("metrics.jsonl line 1"), "{e}");

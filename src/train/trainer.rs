@@ -187,8 +187,9 @@ impl Run<'_> {
     }
 
     /// After the steps of `epoch` (started at `te`, steps done after `t_train` s):
-    /// weight checks, validation, the epoch's record in the run files, `best.bpk` when
-    /// validation segm AP improved and `last.bpk`. Returns whether it improved.
+    /// weight checks, validation (every `train.val_every` epochs and after the last), the
+    /// epoch's record in the run files, `best.bpk` when validation segm AP improved and
+    /// `last.bpk`. Returns whether it improved (never on an epoch without validation).
     fn finish_epoch(
         &self,
         st: &mut TrainState,
@@ -203,13 +204,21 @@ impl Run<'_> {
             check_weights(&st.ema.model, "EMA", epoch)?;
         }
         let eval_model = st.eval_model(cfg.train.ema);
-        let (val, _) = evaluate_ids(
-            &eval_model,
-            self.real,
-            &self.split.val,
-            self.input,
-            self.base,
-        )?;
+        let validate = (epoch + 1) % cfg.train.val_every == 0 || epoch + 1 == cfg.train.epochs;
+        let val = if validate {
+            Some(
+                evaluate_ids(
+                    &eval_model,
+                    self.real,
+                    &self.split.val,
+                    self.input,
+                    self.base,
+                )?
+                .stats,
+            )
+        } else {
+            None
+        };
         let n_items = self.split.train.len() + cfg.data.synthetic;
         let n = steps.steps.max(1) as f64;
         st.records.push(EpochRecord {
@@ -224,17 +233,17 @@ impl Run<'_> {
             proxy: self.real.proxy,
             time: te.elapsed().as_secs_f64(),
             train_time: t_train,
-            val: StatsRecord::from(&val),
+            val: val.as_ref().map(StatsRecord::from),
         });
         run_files::write_metrics(self.run_dir, &st.records, loss_names)?;
 
-        let improved = val.segm[0] > st.best_fitness;
-        if improved {
-            st.best_fitness = val.segm[0];
+        let improved = val.as_ref().is_some_and(|v| v.segm[0] > st.best_fitness);
+        if let (true, Some(v)) = (improved, &val) {
+            st.best_fitness = v.segm[0];
             st.best_epoch = epoch + 1;
         }
         let eval_bytes = module_bytes(&eval_model)?;
-        let header = self.header(st, epoch + 1, Some(val));
+        let header = self.header(st, epoch + 1, val);
         if improved {
             Checkpoint {
                 header: header.clone(),
@@ -346,9 +355,18 @@ fn run_epoch(
 
 /// The line printed after an epoch.
 fn epoch_line(rec: &EpochRecord, epochs: usize, loss_names: &[&str], improved: bool) -> String {
-    let (b, s) = (&rec.val.bbox.stats, &rec.val.segm.stats);
+    let val = match &rec.val {
+        Some(v) => {
+            let (b, s) = (&v.bbox.stats, &v.segm.stats);
+            format!(
+                "val bbox AP {:.3} AP50 {:.3}  segm AP {:.3} AP50 {:.3}",
+                b[0], b[1], s[0], s[1]
+            )
+        }
+        None => "not validated (train.val_every)".into(),
+    };
     format!(
-        "epoch {}/{}  lr {:.2e}  loss {}  {:.1} s ({:.2} img/s)  val bbox AP {:.3} AP50 {:.3}  segm AP {:.3} AP50 {:.3}{}",
+        "epoch {}/{}  lr {:.2e}  loss {}  {:.1} s ({:.2} img/s)  {val}{}",
         rec.epoch,
         epochs,
         rec.lr,
@@ -359,10 +377,6 @@ fn epoch_line(rec: &EpochRecord, epochs: usize, loss_names: &[&str], improved: b
             .join(" "),
         rec.time,
         rec.images_per_s,
-        b[0],
-        b[1],
-        s[0],
-        s[1],
         if improved { "  *best" } else { "" }
     )
 }
@@ -481,7 +495,7 @@ fn test_best(run: &Run) -> Result<(Stats, usize)> {
     let best = Checkpoint::load(&run.run_dir.join("best.bpk"))?;
     let model = best.model("ema", run.base)?;
     let input = best.header.model.input_size();
-    let (test, _) = evaluate_ids(&model, run.real, &run.split.test, input, run.base)?;
+    let test = evaluate_ids(&model, run.real, &run.split.test, input, run.base)?.stats;
     run_files::write_test(
         run.run_dir,
         &TestRecord {
@@ -575,6 +589,40 @@ mod tests {
     }
 
     #[test]
+    fn val_every_validates_every_nth_and_the_last_epoch_only() {
+        // 3 epochs with train.val_every = 2: epochs 2 and 3 are validated, epoch 1 is
+        // not; best.bpk comes from a validated epoch and test.json scores it.
+        let dir = tmp("val-every");
+        let cfg = tiny(&dir, &["train.epochs=3", "train.val_every=2", "train.batch=2"]);
+        let opts = TrainOptions {
+            run_dir: Some(dir.join("run")),
+            quiet: true,
+            ..Default::default()
+        };
+        let s = train(cfg, &opts).unwrap();
+        let run = dir.join("run");
+        let recs = run_files::read_metrics(&run, 9).unwrap();
+        let validated: Vec<bool> = recs.iter().map(|r| r.val.is_some()).collect();
+        assert_eq!(validated, [false, true, true]);
+        let jl = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
+        assert!(!jl.lines().next().unwrap().contains("\"val\""), "{jl}");
+        let csv = std::fs::read_to_string(run.join("results.csv")).unwrap();
+        let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+        let n_loss = 4;
+        assert!(rows[0][3 + n_loss..].iter().all(|c| *c == "null"), "{:?}", rows[0]);
+        assert!(rows[1][3 + n_loss..].iter().all(|c| *c != "null"), "{:?}", rows[1]);
+        let best = Checkpoint::load(&run.join("best.bpk")).unwrap();
+        assert!(matches!(best.header.epoch, 2 | 3), "best from epoch {}", best.header.epoch);
+        assert!(best.header.val.is_some());
+        assert_eq!(s.best_epoch, best.header.epoch);
+        assert_eq!(run_files::read_test(&run).unwrap().epoch, best.header.epoch);
+        let last = Checkpoint::load(&run.join("last.bpk")).unwrap();
+        assert_eq!(last.header.epoch, 3);
+        assert!(run.join("plots.png").is_file());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn epoch_line_reports_every_term_and_the_best_mark() {
         let mut segm = [0.0; 12];
         segm[..2].copy_from_slice(&[0.5, 0.75]);
@@ -586,10 +634,10 @@ mod tests {
             proxy: true,
             time: 12.0,
             train_time: 10.0,
-            val: StatsRecord {
+            val: Some(StatsRecord {
                 bbox: IouStats { stats: [0.25; 12] },
                 segm: IouStats { stats: segm },
-            },
+            }),
         };
         let line = epoch_line(&rec, 25, &["box", "seg"], true);
         assert_eq!(
@@ -597,5 +645,10 @@ mod tests {
             "epoch 3/25  lr 1.00e-2  loss box 1.250 seg 0.500  12.0 s (6.50 img/s)  val bbox AP 0.250 AP50 0.250  segm AP 0.500 AP50 0.750  *best"
         );
         assert!(!epoch_line(&rec, 25, &["box", "seg"], false).contains("best"));
+        let skipped = EpochRecord { val: None, ..rec };
+        assert_eq!(
+            epoch_line(&skipped, 25, &["box", "seg"], false),
+            "epoch 3/25  lr 1.00e-2  loss box 1.250 seg 0.500  12.0 s (6.50 img/s)  not validated (train.val_every)"
+        );
     }
 }

@@ -120,7 +120,7 @@ pub fn smoke_scenario(dir: &Path, config: &str, loss_names: &[&str]) -> SmokeRun
     assert_eq!(ev.bbox, test.bbox);
     assert_eq!(ev.segm, test.segm);
     let ev = eval_stats(&best, SplitName::Val, None);
-    assert_eq!(ev.segm, records[test.epoch - 1].val.segm);
+    assert_eq!(ev.segm, records[test.epoch - 1].val.as_ref().unwrap().segm);
 
     // predict reads the model kind from the checkpoint, writes overlays and a results file.
     let img_dir = dir.join("imgs");

@@ -2,9 +2,9 @@
 //! 3×3 convs + ReLU on 14×14 RoI features, a 2×2 stride-2 deconv + ReLU, and a 1×1
 //! predictor giving 28×28 logits per class (or one class-agnostic map). The head returns
 //! logits only; [`mask_loss`] (per-pixel BCE against GT masks RoIAligned onto the proposal,
-//! binarised at 0.5, on the GT class's map), [`mask_targets`] and [`paste_mask`] (the
-//! inference-side `_do_paste_mask`: bilinear, `align_corners = False`, zero outside, then
-//! threshold) are free functions beside it.
+//! binarised at 0.5, on the GT class's map) and [`mask_targets`] are free functions beside
+//! it; pasting the probabilities into the image is
+//! [`crate::model::instance_mask::paste_roi_mask`], at whatever size the caller decodes.
 
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
@@ -180,74 +180,11 @@ pub fn mask_loss(logits: Tensor<4>, classes: &[usize], targets: Vec<f32>) -> Ten
         .reshape([1])
 }
 
-/// Pastes an `M × M` probability map onto its xyxy box in an `H × W` image and thresholds it
-/// (`≥ threshold` → 1). Pixel `(x, y)` samples the map at
-/// `u = (x + 0.5 − x0)/(x1 − x0)·M − 0.5` (same for y) with zero padding.
-pub fn paste_mask(
-    prob: &[f32],
-    m: usize,
-    bx: [f32; 4],
-    [h, w]: [usize; 2],
-    threshold: f32,
-) -> Vec<u8> {
-    let mut out = vec![0u8; h * w];
-    let (bw, bh) = (bx[2] - bx[0], bx[3] - bx[1]);
-    if !(bw > 0.0 && bh > 0.0) {
-        return out;
-    }
-    let range = |lo: f32, hi: f32, pad: f32, size: usize| {
-        let a = (lo - pad).floor().max(0.0) as usize;
-        let b = ((hi + pad).ceil().max(0.0) as usize).min(size);
-        a..b
-    };
-    let taps = |u: f32| -> [(isize, f32); 2] {
-        let f = u.floor();
-        let l = u - f;
-        [(f as isize, 1.0 - l), (f as isize + 1, l)]
-    };
-    let at = |r: isize, c: isize| {
-        if r < 0 || c < 0 || r >= m as isize || c >= m as isize {
-            0.0
-        } else {
-            prob[r as usize * m + c as usize]
-        }
-    };
-    for y in range(bx[1], bx[3], bh / m as f32, h) {
-        let v = (y as f32 + 0.5 - bx[1]) / bh * m as f32 - 0.5;
-        let ty = taps(v);
-        for x in range(bx[0], bx[2], bw / m as f32, w) {
-            let u = (x as f32 + 0.5 - bx[0]) / bw * m as f32 - 0.5;
-            let tx = taps(u);
-            let mut p = 0.0;
-            for &(r, wy) in &ty {
-                for &(c, wx) in &tx {
-                    p += wy * wx * at(r, c);
-                }
-            }
-            if p >= threshold {
-                out[y * w + x] = 1;
-            }
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::instance_mask::paste_roi_mask;
     use crate::util::tensor::{host, to_host};
-
-    #[test]
-    fn paste_full_map_fills_the_box() {
-        let prob = vec![1.0f32; 28 * 28];
-        let m = paste_mask(&prob, 28, [4.0, 2.0, 12.0, 10.0], [16, 16], 0.5);
-        for y in 0..16 {
-            for x in 0..16 {
-                let inside = (4..12).contains(&x) && (2..10).contains(&y);
-                assert_eq!(m[y * 16 + x] == 1, inside, "pixel ({x}, {y})");
-            }
-        }
-    }
 
     #[test]
     fn targets_then_paste_round_trip() {
@@ -264,7 +201,7 @@ mod tests {
         }
         let bx = [9.0, 10.0, 39.0, 30.0];
         let t = mask_targets(&[(&mask, bx)], [h, w], 28);
-        let back = paste_mask(&t, 28, bx, [h, w], 0.5);
+        let back = paste_roi_mask(&t, 28, bx, (w as u32, h as u32), 0.5).full().data;
         let inter = mask
             .iter()
             .zip(&back)

@@ -31,7 +31,6 @@ use burn::module::Module;
 use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor};
 use rand::Rng;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{MaskRcnnModelConfig, MaskRcnnPreset};
@@ -41,7 +40,8 @@ pub use crate::model::summary::ModelSummary;
 use crate::util::tensor::{host, to_host};
 use anchors::AnchorConfig;
 use fpn::Fpn;
-use mask_head::{mask_loss, mask_targets, paste_mask, MaskHead, MaskHeadConfig};
+use mask_head::{mask_loss, mask_targets, MaskHead, MaskHeadConfig};
+use crate::model::instance_mask::MaskSource;
 use pooler::pool_levels;
 use resnet::ResNet;
 use roi_heads::{box_inference, box_loss, label_and_sample, BoxHead, RoiHeadsConfig};
@@ -384,11 +384,12 @@ impl MaskRcnn {
         }
     }
 
-    /// Inference: per image, at most `roi.max_det` detections with masks at input size.
+    /// Inference: per image, at most `roi.max_det` detections, each with its RoI's mask
+    /// probabilities (decoded by the caller at the size it needs).
     /// Call on `model.valid()` (no autodiff graph).
     ///
     /// # Shapes
-    /// - `images`: `[B, 3, H, W]` in `[0, 1]` → `B` lists; `mask` is `H·W` bytes
+    /// - `images`: `[B, 3, H, W]` in `[0, 1]` → `B` lists; `mask` holds `M × M` probabilities
     pub fn forward_infer(&self, images: Tensor<4>) -> Vec<Vec<Detection>> {
         let [h, w] = self.check_input(&images);
         let b = images.dims()[0];
@@ -447,19 +448,22 @@ impl MaskRcnn {
         debug_assert_eq!(flat.len(), n);
         let thr = cfg.mask.threshold;
         let built: Vec<(usize, Detection)> = flat
-            .par_iter()
+            .iter()
             .enumerate()
             .map(|(r, &(bx, score, class, img))| {
                 let ch = if k == 1 { 0 } else { class };
                 let p = &probs[(r * k + ch) * m * m..(r * k + ch + 1) * m * m];
-                let mask = paste_mask(p, m, bx, [h, w], thr);
                 (
                     img,
                     Detection {
                         bbox: [bx[0], bx[1], bx[2] - bx[0], bx[3] - bx[1]],
                         score,
                         class,
-                        mask,
+                        mask: MaskSource::RoiProbs {
+                            probs: p.to_vec(),
+                            size: m,
+                            threshold: thr,
+                        },
                     },
                 )
             })
