@@ -4,6 +4,7 @@
 //! - [`assigner`]: task-aligned assigner (plain Rust over host vectors, no gradients).
 //! - [`loss`]: BCE class, CIoU + DFL box and prototype mask losses ([`loss::yolo_loss`]).
 //! - [`postprocess`]: decoding, class-wise NMS and mask assembly for inference.
+//! - [`onnx`]: ONNX export in ultralytics' output layout.
 //!
 //! This module defines the model config ([`YoloSegConfig`]), the model ([`YoloSeg`]) and its
 //! output ([`YoloOutput`]). It reads no training config.
@@ -15,6 +16,7 @@ pub mod blocks;
 pub mod head;
 pub mod loss;
 pub mod neck;
+pub mod onnx;
 pub mod postprocess;
 pub mod scale;
 

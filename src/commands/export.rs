@@ -1,0 +1,66 @@
+//! `chicktrain export --checkpoint X.bpk --format onnx|safetensors [--out PATH]`: a
+//! checkpoint's weights in a format other tools read. Each format lives in its own file
+//! ([`super::onnx`]); this file only picks one and the default output path.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Result};
+
+use super::onnx::{export_onnx, OnnxExport};
+
+/// The formats `export` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExportFormat {
+    /// The inference graph in ultralytics' ONNX layout (YOLO-seg).
+    Onnx,
+    /// The state dict under ultralytics' / torchvision's key names.
+    Safetensors,
+}
+
+impl ExportFormat {
+    pub fn extension(self) -> &'static str {
+        match self {
+            ExportFormat::Onnx => "onnx",
+            ExportFormat::Safetensors => "safetensors",
+        }
+    }
+}
+
+/// What `export` was asked for.
+#[derive(Debug, Clone)]
+pub struct ExportRequest {
+    pub checkpoint: PathBuf,
+    pub format: ExportFormat,
+    /// Default: the checkpoint's path with the format's extension (`best.bpk` →
+    /// `best.onnx`), as ultralytics writes `best.onnx` beside `best.pt`.
+    pub out: Option<PathBuf>,
+    /// ONNX: batch size of the graph (and of the reference input).
+    pub batch: usize,
+    /// ONNX: symbolic batch dimension.
+    pub dynamic: bool,
+    /// ONNX: also write `<out>.reference.safetensors` (input + chicktrain's outputs).
+    pub reference: bool,
+}
+
+/// Output path of an export.
+pub fn out_path(checkpoint: &Path, format: ExportFormat, out: Option<&Path>) -> PathBuf {
+    out.map(Path::to_path_buf)
+        .unwrap_or_else(|| checkpoint.with_extension(format.extension()))
+}
+
+pub fn export_cmd(r: &ExportRequest) -> Result<String> {
+    let out = out_path(&r.checkpoint, r.format, r.out.as_deref());
+    match r.format {
+        ExportFormat::Onnx => export_onnx(&OnnxExport {
+            checkpoint: r.checkpoint.clone(),
+            out,
+            batch: r.batch,
+            dynamic: r.dynamic,
+            reference: r.reference,
+        }),
+        ExportFormat::Safetensors => bail!(
+            "export --format safetensors is not built in this branch (it comes with the \
+             weights-in/out work); --format onnx is"
+        ),
+    }
+}
