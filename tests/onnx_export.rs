@@ -23,7 +23,14 @@ fn export_then_predict_with_tract_matches_checkpoint() {
     let best_s = best.to_str().unwrap();
 
     // Default output path: best.onnx beside best.bpk; the reference file beside it.
-    let out = run(&["export", "--checkpoint", best_s, "--format", "onnx", "--reference"]);
+    let out = run(&[
+        "export",
+        "--checkpoint",
+        best_s,
+        "--format",
+        "onnx",
+        "--reference",
+    ]);
     assert_success(&out);
     let onnx = run_dir.join("best.onnx");
     assert!(onnx.is_file());
@@ -54,7 +61,15 @@ fn export_then_predict_with_tract_matches_checkpoint() {
     ]));
     let input = imgs.join("images");
     let pred = |args: &[&str], conf: &str, out: &Path| {
-        let mut a = vec!["predict", "--input", input.to_str().unwrap(), "--out", out.to_str().unwrap(), "--conf", conf];
+        let mut a = vec![
+            "predict",
+            "--input",
+            input.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--conf",
+            conf,
+        ];
         a.extend_from_slice(args);
         let o = run(&a);
         assert_success(&o);
@@ -72,8 +87,16 @@ fn export_then_predict_with_tract_matches_checkpoint() {
         .expect("the smoke model's scores have a gap above 1e-3");
     let conf = format!("{}", (gap[0] + gap[1]) / 2.0);
     let by_ck = pred(&["--checkpoint", best_s], &conf, &d.join("p_ck"));
-    let by_onnx = pred(&["--onnx", onnx.to_str().unwrap()], &conf, &d.join("p_onnx"));
-    let by_dyn = pred(&["--onnx", dynamic.to_str().unwrap(), "--threads", "1"], &conf, &d.join("p_dyn"));
+    let by_onnx = pred(
+        &["--onnx", onnx.to_str().unwrap()],
+        &conf,
+        &d.join("p_onnx"),
+    );
+    let by_dyn = pred(
+        &["--onnx", dynamic.to_str().unwrap(), "--threads", "1"],
+        &conf,
+        &d.join("p_dyn"),
+    );
     assert!(!by_ck.is_empty());
     for other in [&by_onnx, &by_dyn] {
         assert_eq!(by_ck.len(), other.len(), "at --conf {conf}");
@@ -83,7 +106,10 @@ fn export_then_predict_with_tract_matches_checkpoint() {
             let (sa, sb) = (a["score"].as_f64().unwrap(), b["score"].as_f64().unwrap());
             assert!((sa - sb).abs() < 1e-4, "score {sa} vs {sb}");
             for k in 0..4 {
-                let (u, v) = (a["bbox"][k].as_f64().unwrap(), b["bbox"][k].as_f64().unwrap());
+                let (u, v) = (
+                    a["bbox"][k].as_f64().unwrap(),
+                    b["bbox"][k].as_f64().unwrap(),
+                );
                 assert!((u - v).abs() < 0.05, "bbox {} vs {}", a["bbox"], b["bbox"]);
             }
             // Masks: the same pixels, up to a few on the threshold (IoU > 0.99).
@@ -95,11 +121,15 @@ fn export_then_predict_with_tract_matches_checkpoint() {
             let (ra, rb) = (rle(a), rle(b));
             let bb = [0.0, 0.0, 1.0, 1.0];
             let iou = rle_iou(&ra, &bb, &rb, &bb, false);
-            assert!(ra.area() == 0 && rb.area() == 0 || iou > 0.99, "mask IoU {iou}");
+            assert!(
+                ra.area() == 0 && rb.area() == 0 || iou > 0.99,
+                "mask IoU {iou}"
+            );
         }
     }
     let images: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("p_onnx/images.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(d.join("p_onnx/images.json")).unwrap())
+            .unwrap();
     assert_eq!(images["categories"][0]["name"], "carcass");
 }
 
@@ -121,10 +151,22 @@ fn export_errors_are_clean() {
     ]);
     assert_clean_error(&out, &["junk.onnx"]);
     let missing = d.join("none.bpk");
-    let out = run(&["export", "--checkpoint", missing.to_str().unwrap(), "--format", "onnx"]);
+    let out = run(&[
+        "export",
+        "--checkpoint",
+        missing.to_str().unwrap(),
+        "--format",
+        "onnx",
+    ]);
     assert_clean_error(&out, &["none.bpk"]);
     assert!(!d.join("none.onnx").exists());
-    let out = run(&["export", "--checkpoint", missing.to_str().unwrap(), "--format", "safetensors"]);
+    let out = run(&[
+        "export",
+        "--checkpoint",
+        missing.to_str().unwrap(),
+        "--format",
+        "safetensors",
+    ]);
     assert_clean_error(&out, &["safetensors"]);
 
     // Mask R-CNN: a clear "not yet", no file written.
@@ -132,7 +174,13 @@ fn export_errors_are_clean() {
     let mut a = smoke_args(&mr, &[]);
     a[1] = "maskrcnn_r50_syn250.toml".into();
     assert_success(&run(&a));
-    let out = run(&["export", "--checkpoint", mr.join("best.bpk").to_str().unwrap(), "--format", "onnx"]);
+    let out = run(&[
+        "export",
+        "--checkpoint",
+        mr.join("best.bpk").to_str().unwrap(),
+        "--format",
+        "onnx",
+    ]);
     assert_clean_error(&out, &["Mask R-CNN is not implemented yet"]);
     assert!(!mr.join("best.onnx").exists());
 }

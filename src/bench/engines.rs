@@ -31,11 +31,20 @@ pub struct EngineRow {
 }
 
 fn stats(v: &[f64]) -> [f64; 3] {
-    [percentile(v, 50.0), percentile(v, 10.0), percentile(v, 90.0)]
+    [
+        percentile(v, 50.0),
+        percentile(v, 10.0),
+        percentile(v, 90.0),
+    ]
 }
 
 /// Times `variant` at `size`: `warmup` untimed and `repeats` timed runs per engine.
-pub fn time_engines(variant: &Variant, size: usize, warmup: usize, repeats: usize) -> Result<EngineRow> {
+pub fn time_engines(
+    variant: &Variant,
+    size: usize,
+    warmup: usize,
+    repeats: usize,
+) -> Result<EngineRow> {
     let Some(cfg) = variant.yolo_config(size) else {
         bail!("bench engines: {variant} is not a YOLO variant (only YOLO-seg exports to ONNX)");
     };
@@ -71,7 +80,11 @@ pub fn time_engines(variant: &Variant, size: usize, warmup: usize, repeats: usiz
         category_ids: vec![1],
     };
     let bytes = encode(&export_yolo(&model, [size, size], &opts)?);
-    let eng = TractEngine::from_bytes(&bytes, Path::new(&format!("{variant}@{size}.onnx")), Some(1))?;
+    let eng = TractEngine::from_bytes(
+        &bytes,
+        Path::new(&format!("{variant}@{size}.onnx")),
+        Some(1),
+    )?;
     let mut tract = Vec::new();
     let mut got = Vec::new();
     for r in 0..warmup + repeats {
@@ -82,7 +95,12 @@ pub fn time_engines(variant: &Variant, size: usize, warmup: usize, repeats: usiz
         }
         got = o;
     }
-    let diff = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
+    let diff = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f32, f32::max)
+    };
     Ok(EngineRow {
         variant: variant.to_string(),
         size,

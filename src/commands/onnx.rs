@@ -81,7 +81,9 @@ pub fn export_onnx(r: &OnnxExport) -> Result<String> {
     if r.reference {
         let b = r.batch;
         let mut rng = ChaCha8Rng::seed_from_u64(REFERENCE_SEED);
-        let x: Vec<f32> = (0..b * 3 * size * size).map(|_| rng.random::<f32>()).collect();
+        let x: Vec<f32> = (0..b * 3 * size * size)
+            .map(|_| rng.random::<f32>())
+            .collect();
         let out = yolo.forward(Tensor::<4>::from_data(
             TensorData::new(x.clone(), [b, 3, size, size]),
             &dev,
@@ -208,7 +210,10 @@ fn parse_names(s: &str) -> Result<Vec<String>> {
             .trim()
             .parse()
             .with_context(|| format!("bad class index {idx:?} in {s:?}"))?;
-        ensure!(idx == out.len(), "class indices in {s:?} are not 0, 1, 2, …");
+        ensure!(
+            idx == out.len(),
+            "class indices in {s:?} are not 0, 1, 2, …"
+        );
         while chars.peek().is_some_and(|c| c.is_whitespace()) {
             chars.next();
         }
@@ -247,27 +252,34 @@ pub fn predict_onnx(
     let info = model_info(&eng)?;
     let size = info.size;
     let nc = info.num_classes;
-    let text = predict_images(input, out_dir, size as u32, &info.classes, conf, &mut |px| {
-        let out = eng.run(&[1, 3, size, size], &px)?;
-        let (o0, o1) = (&out[0], &out[1]);
-        ensure!(
-            o0.shape.len() == 3 && o1.shape.len() == 4 && o0.shape[1] == 4 + nc + o1.shape[1],
-            "{}: outputs {:?} and {:?} are not [1, 4 + {nc} + nm, A] and [1, nm, H, W]",
-            onnx.display(),
-            o0.shape,
-            o1.shape
-        );
-        let s0 = [o0.shape[0], o0.shape[1], o0.shape[2]];
-        let s1 = [o1.shape[0], o1.shape[1], o1.shape[2], o1.shape[3]];
-        Ok(postprocess_layout(
-            (&o0.data, s0),
-            (&o1.data, s1),
-            nc,
-            [size, size],
-            (conf, VAL_IOU, VAL_MAX_DET),
-        )
-        .swap_remove(0))
-    })?;
+    let text = predict_images(
+        input,
+        out_dir,
+        size as u32,
+        &info.classes,
+        conf,
+        &mut |px| {
+            let out = eng.run(&[1, 3, size, size], &px)?;
+            let (o0, o1) = (&out[0], &out[1]);
+            ensure!(
+                o0.shape.len() == 3 && o1.shape.len() == 4 && o0.shape[1] == 4 + nc + o1.shape[1],
+                "{}: outputs {:?} and {:?} are not [1, 4 + {nc} + nm, A] and [1, nm, H, W]",
+                onnx.display(),
+                o0.shape,
+                o1.shape
+            );
+            let s0 = [o0.shape[0], o0.shape[1], o0.shape[2]];
+            let s1 = [o1.shape[0], o1.shape[1], o1.shape[2], o1.shape[3]];
+            Ok(postprocess_layout(
+                (&o0.data, s0),
+                (&o1.data, s1),
+                nc,
+                [size, size],
+                (conf, VAL_IOU, VAL_MAX_DET),
+            )
+            .swap_remove(0))
+        },
+    )?;
     Ok(format!("{text} (tract, {})", onnx.display()))
 }
 
@@ -288,7 +300,13 @@ pub fn bench_engines_cmd(
         .map(|v| v.trim().parse())
         .collect::<Result<Vec<Variant>>>()?;
     let sizes = parse_sizes(sizes)?;
-    bench_engines(&vs, &sizes, warmup, repeats, threads.unwrap_or_else(all_cores))
+    bench_engines(
+        &vs,
+        &sizes,
+        warmup,
+        repeats,
+        threads.unwrap_or_else(all_cores),
+    )
 }
 
 #[cfg(test)]
@@ -302,7 +320,10 @@ mod tests {
             parse_names(r#"{0: 'a', 1: "b c", 2: 'it\'s'}"#).unwrap(),
             ["a", "b c", "it's"]
         );
-        assert!(parse_names("{1: 'a'}").unwrap_err().to_string().contains("not 0, 1, 2"));
+        assert!(parse_names("{1: 'a'}")
+            .unwrap_err()
+            .to_string()
+            .contains("not 0, 1, 2"));
         assert!(parse_names("['a']").is_err());
         assert!(parse_names("{0: a}").is_err());
     }

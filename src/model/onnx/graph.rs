@@ -7,8 +7,8 @@ use anyhow::{ensure, Result};
 use prost::Message;
 use tract_onnx::pb::{
     attribute_proto::AttributeType, tensor_proto::DataType, tensor_shape_proto, type_proto,
-    AttributeProto, GraphProto, ModelProto, NodeProto, OperatorSetIdProto,
-    StringStringEntryProto, TensorProto, TensorShapeProto, TypeProto, ValueInfoProto,
+    AttributeProto, GraphProto, ModelProto, NodeProto, OperatorSetIdProto, StringStringEntryProto,
+    TensorProto, TensorShapeProto, TypeProto, ValueInfoProto,
 };
 
 /// The opset the exported graphs declare (ultralytics' export supports ≥ 17 for
@@ -188,7 +188,13 @@ impl GraphBuilder {
         outputs
     }
 
-    fn one(&mut self, scope: &str, op: &str, inputs: &[&str], attrs: Vec<AttributeProto>) -> String {
+    fn one(
+        &mut self,
+        scope: &str,
+        op: &str,
+        inputs: &[&str],
+        attrs: Vec<AttributeProto>,
+    ) -> String {
         self.node(scope, op, inputs, 1, attrs).remove(0)
     }
 
@@ -284,7 +290,13 @@ impl GraphBuilder {
             &format!("{scope}.split"),
             &sizes.iter().map(|&v| v as i64).collect::<Vec<_>>(),
         );
-        self.node(scope, "Split", &[x, &s], sizes.len(), vec![attr_int("axis", axis)])
+        self.node(
+            scope,
+            "Split",
+            &[x, &s],
+            sizes.len(),
+            vec![attr_int("axis", axis)],
+        )
     }
 
     /// `Reshape` to `shape` (0 copies the input's dimension, −1 is inferred: with a
@@ -302,7 +314,14 @@ impl GraphBuilder {
         self.one(scope, "Softmax", &[x], vec![attr_int("axis", axis)])
     }
 
-    pub fn max_pool(&mut self, scope: &str, x: &str, k: usize, stride: usize, pad: usize) -> String {
+    pub fn max_pool(
+        &mut self,
+        scope: &str,
+        x: &str,
+        k: usize,
+        stride: usize,
+        pad: usize,
+    ) -> String {
         let (k, s, p) = (k as i64, stride as i64, pad as i64);
         self.one(
             scope,

@@ -64,12 +64,23 @@ fn conv2d(g: &mut GraphBuilder, scope: &str, x: &str, conv: &Conv2d) -> Result<S
     let dims = conv.weight.dims();
     let w = to_host(conv.weight.val());
     let b = conv.bias.as_ref().map(|b| to_host(b.val()));
-    Ok(g.conv(scope, x, (&dims, &w), b.as_deref(), conv.stride, pad, conv.groups))
+    Ok(g.conv(
+        scope,
+        x,
+        (&dims, &w),
+        b.as_deref(),
+        conv.stride,
+        pad,
+        conv.groups,
+    ))
 }
 
 /// ultralytics `Conv` after `fuse()`: conv with the folded bias, then SiLU.
 fn conv_bn(g: &mut GraphBuilder, scope: &str, x: &str, c: &ConvBn) -> Result<String> {
-    ensure!(c.fused, "{scope}: BatchNorm not folded (export a fused model)");
+    ensure!(
+        c.fused,
+        "{scope}: BatchNorm not folded (export a fused model)"
+    );
     let y = conv2d(g, &format!("{scope}/conv"), x, &c.conv)?;
     Ok(if c.act {
         g.silu(&format!("{scope}/act"), &y)
@@ -192,7 +203,13 @@ fn proto(g: &mut GraphBuilder, scope: &str, x: &str, p: &Proto) -> Result<String
     let dims = up.weight.dims();
     let w = to_host(up.weight.val());
     let b = up.bias.as_ref().map(|b| to_host(b.val()));
-    let y = g.conv_transpose(&format!("{scope}/upsample"), &y, (&dims, &w), b.as_deref(), up.stride);
+    let y = g.conv_transpose(
+        &format!("{scope}/upsample"),
+        &y,
+        (&dims, &w),
+        b.as_deref(),
+        up.stride,
+    );
     let y = conv_bn(g, &format!("{scope}/cv2"), &y, &p.cv2)?;
     conv_bn(g, &format!("{scope}/cv3"), &y, &p.cv3)
 }
@@ -213,13 +230,21 @@ fn py_str(s: &str) -> String {
 }
 
 /// The ONNX model of `model` (eval mode, not necessarily fused) at `input = [H, W]`.
-pub fn export_yolo(model: &YoloSeg, input: [usize; 2], opts: &OnnxExportOptions) -> Result<tract_onnx::pb::ModelProto> {
+pub fn export_yolo(
+    model: &YoloSeg,
+    input: [usize; 2],
+    opts: &OnnxExportOptions,
+) -> Result<tract_onnx::pb::ModelProto> {
     let [h, w] = input;
     ensure!(
         h > 0 && w > 0 && h % 32 == 0 && w % 32 == 0,
         "ONNX export: input {h}×{w} must be positive multiples of 32"
     );
-    ensure!(opts.batch > 0, "ONNX export: batch must be ≥ 1, got {}", opts.batch);
+    ensure!(
+        opts.batch > 0,
+        "ONNX export: batch must be ≥ 1, got {}",
+        opts.batch
+    );
     let nc = model.num_classes();
     ensure!(
         opts.names.len() == nc,
@@ -234,7 +259,10 @@ pub fn export_yolo(model: &YoloSeg, input: [usize; 2], opts: &OnnxExportOptions)
         Dim::Fixed(opts.batch)
     };
     let mut g = GraphBuilder::new();
-    let x = g.input("images", &[batch.clone(), Dim::Fixed(3), Dim::Fixed(h), Dim::Fixed(w)]);
+    let x = g.input(
+        "images",
+        &[batch.clone(), Dim::Fixed(3), Dim::Fixed(h), Dim::Fixed(w)],
+    );
 
     // Backbone (ultralytics layer indices in the scopes: /model.0 … /model.10).
     let bb = &m.backbone;
@@ -319,7 +347,15 @@ pub fn export_yolo(model: &YoloSeg, input: [usize; 2], opts: &OnnxExportOptions)
     let y = g.transpose(&sd, &y, &[0, 2, 1, 3]);
     let y = g.softmax(&sd, &y, 1);
     let bins: Vec<f32> = (0..REG_MAX).map(|r| r as f32).collect();
-    let y = g.conv(&format!("{sd}/conv"), &y, (&[1, REG_MAX, 1, 1], &bins), None, [1, 1], [0, 0], 1);
+    let y = g.conv(
+        &format!("{sd}/conv"),
+        &y,
+        (&[1, REG_MAX, 1, 1], &bins),
+        None,
+        [1, 1],
+        [0, 0],
+        1,
+    );
     let dist = g.reshape(&sd, &y, &[0, 4, -1]);
     // dist2bbox(xywh=True) × strides, anchors `[2, A]` in grid units.
     let points = grid.points();
@@ -344,8 +380,16 @@ pub fn export_yolo(model: &YoloSeg, input: [usize; 2], opts: &OnnxExportOptions)
 
     let (pst, ph, pw) = (m.strides[0] / 2, h * 2 / m.strides[0], w * 2 / m.strides[0]);
     debug_assert!(pst > 0);
-    g.output(&out0, "output0", &[batch.clone(), Dim::Fixed(4 + nc + nm), Dim::Fixed(na)]);
-    g.output(&proto_out, "output1", &[batch, Dim::Fixed(nm), Dim::Fixed(ph), Dim::Fixed(pw)]);
+    g.output(
+        &out0,
+        "output0",
+        &[batch.clone(), Dim::Fixed(4 + nc + nm), Dim::Fixed(na)],
+    );
+    g.output(
+        &proto_out,
+        "output1",
+        &[batch, Dim::Fixed(nm), Dim::Fixed(ph), Dim::Fixed(pw)],
+    );
 
     let names = opts
         .names
@@ -487,11 +531,19 @@ mod tests {
 
     fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
         assert_eq!(a.len(), b.len());
-        a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max)
     }
 
     /// chicktrain's forward in ultralytics' layout: (output0, its shape, proto, its shape).
-    fn reference(m: &YoloSeg, x: &[f32], b: usize, hw: [usize; 2]) -> (Vec<f32>, Vec<usize>, Vec<f32>, Vec<usize>) {
+    fn reference(
+        m: &YoloSeg,
+        x: &[f32],
+        b: usize,
+        hw: [usize; 2],
+    ) -> (Vec<f32>, Vec<usize>, Vec<f32>, Vec<usize>) {
         let d = Device::flex();
         let t = Tensor::<4>::from_data(TensorData::new(x.to_vec(), [b, 3, hw[0], hw[1]]), &d);
         let out = m.forward(t);
@@ -512,12 +564,21 @@ mod tests {
         assert_eq!(out.len(), 2);
         assert_eq!(out[0].shape, s0, "output0 shape");
         assert_eq!(out[1].shape, s1, "output1 shape");
-        let (d0, d1) = (max_abs_diff(&out[0].data, &r0), max_abs_diff(&out[1].data, &r1));
+        let (d0, d1) = (
+            max_abs_diff(&out[0].data, &r0),
+            max_abs_diff(&out[1].data, &r1),
+        );
         eprintln!("{tag}: tract vs chicktrain max |Δ| output0 {d0:.3e}, output1 {d1:.3e}");
-        assert!(d0 <= 1e-4 && d1 <= 1e-4, "{tag}: output0 {d0}, output1 {d1}");
+        assert!(
+            d0 <= 1e-4 && d1 <= 1e-4,
+            "{tag}: output0 {d0}, output1 {d1}"
+        );
         // The comparison is not vacuous: boxes, scores and prototypes vary.
         let na = s0[2];
-        assert!(r0[..na].iter().any(|&v| (v - r0[0]).abs() > 1.0), "box centres all equal");
+        assert!(
+            r0[..na].iter().any(|&v| (v - r0[0]).abs() > 1.0),
+            "box centres all equal"
+        );
         assert!(r1.iter().any(|&v| (v - r1[0]).abs() > 1e-3));
     }
 
@@ -535,8 +596,16 @@ mod tests {
     fn dynamic_batch_matches_static() {
         let m = small_model(HeadLevels::P3P5, true, 5);
         let hw = [64, 64];
-        let stat = write("dyn", "static1.onnx", &export_yolo(&m, hw, &opts(1, false)).unwrap());
-        let dynm = write("dyn", "dynamic.onnx", &export_yolo(&m, hw, &opts(1, true)).unwrap());
+        let stat = write(
+            "dyn",
+            "static1.onnx",
+            &export_yolo(&m, hw, &opts(1, false)).unwrap(),
+        );
+        let dynm = write(
+            "dyn",
+            "dynamic.onnx",
+            &export_yolo(&m, hw, &opts(1, true)).unwrap(),
+        );
         let es = TractEngine::load(&stat, None).unwrap();
         let ed = TractEngine::load(&dynm, None).unwrap();
         assert_eq!(ed.input_shape, vec![None, Some(3), Some(64), Some(64)]);
@@ -549,7 +618,9 @@ mod tests {
         assert_eq!(d3[0].shape[0], 3);
         let (n0, n1) = (d3[0].data.len() / 3, d3[1].data.len() / 3);
         for i in 0..3 {
-            let s = es.run(&[1, 3, 64, 64], &x3[i * plane..(i + 1) * plane]).unwrap();
+            let s = es
+                .run(&[1, 3, 64, 64], &x3[i * plane..(i + 1) * plane])
+                .unwrap();
             let a = max_abs_diff(&s[0].data, &d3[0].data[i * n0..(i + 1) * n0]);
             let b = max_abs_diff(&s[1].data, &d3[1].data[i * n1..(i + 1) * n1]);
             assert!(a <= 1e-4 && b <= 1e-4, "image {i}: {a} {b}");
@@ -568,7 +639,11 @@ mod tests {
     fn metadata_reads_like_ultralytics() {
         let m = small_model(HeadLevels::P3P5, false, 1);
         let model = export_yolo(&m, [64, 64], &opts(4, true)).unwrap();
-        let md = |k: &str| crate::model::onnx::graph::metadata(&model, k).unwrap().to_string();
+        let md = |k: &str| {
+            crate::model::onnx::graph::metadata(&model, k)
+                .unwrap()
+                .to_string()
+        };
         assert_eq!(md("task"), "segment");
         assert_eq!(md("stride"), "32");
         assert_eq!(md("imgsz"), "[64, 64]");
@@ -591,10 +666,17 @@ mod tests {
         let mut o = opts(1, false);
         o.names.pop();
         let e = export_yolo(&m, [64, 64], &o).unwrap_err().to_string();
-        assert!(e.contains("1 class names for a model with 2 classes"), "{e}");
-        let e = export_yolo(&m, [64, 70], &opts(1, false)).unwrap_err().to_string();
+        assert!(
+            e.contains("1 class names for a model with 2 classes"),
+            "{e}"
+        );
+        let e = export_yolo(&m, [64, 70], &opts(1, false))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("multiples of 32"), "{e}");
-        let e = export_yolo(&m, [64, 64], &opts(0, false)).unwrap_err().to_string();
+        let e = export_yolo(&m, [64, 64], &opts(0, false))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("batch must be ≥ 1"), "{e}");
     }
 
@@ -604,7 +686,10 @@ mod tests {
         let m = small_model(HeadLevels::P3P5, true, 9);
         let d = Device::flex();
         let x = input(2, [64, 96], 4);
-        let out = m.forward(Tensor::<4>::from_data(TensorData::new(x, [2, 3, 64, 96]), &d));
+        let out = m.forward(Tensor::<4>::from_data(
+            TensorData::new(x, [2, 3, 64, 96]),
+            &d,
+        ));
         // conf 0: every anchor is a candidate, so NMS and masks see many boxes.
         let raw = postprocess(&out, 0.0, 0.7, 300);
         let (y0, s0) = ultralytics_output0(&out);
@@ -619,7 +704,12 @@ mod tests {
                 assert_eq!(u.class, v.class);
                 assert!((u.score - v.score).abs() < 1e-6);
                 for k in 0..4 {
-                    assert!((u.bbox[k] - v.bbox[k]).abs() < 1e-3, "{:?} vs {:?}", u.bbox, v.bbox);
+                    assert!(
+                        (u.bbox[k] - v.bbox[k]).abs() < 1e-3,
+                        "{:?} vs {:?}",
+                        u.bbox,
+                        v.bbox
+                    );
                 }
                 let diff = u.mask.iter().zip(&v.mask).filter(|(p, q)| p != q).count();
                 assert!(diff <= 2, "{diff} mask pixels differ");
