@@ -289,6 +289,9 @@ enum BenchWhat {
         /// tract threads (default: every core; flex always uses every core).
         #[arg(long)]
         threads: Option<usize>,
+        /// Also write each exported file here (<variant>_<size>.onnx).
+        #[arg(long)]
+        save_onnx: Option<PathBuf>,
     },
     /// Scene ablation: train one variant per dropped/shrunk model option, report test AP
     /// vs latency and a recommended default (runs/ablation/<config name>/).
@@ -409,7 +412,15 @@ impl BenchWhat {
                 repeats,
                 warmup,
                 threads,
-            } => onnx_cmd::bench_engines_cmd(&variants, &sizes, warmup, repeats, threads),
+                save_onnx,
+            } => onnx_cmd::bench_engines_cmd(
+                &variants,
+                &sizes,
+                warmup,
+                repeats,
+                threads,
+                save_onnx.as_deref(),
+            ),
             BenchWhat::Ablation {
                 config,
                 syn,

@@ -8,7 +8,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::variant::Variant;
@@ -18,6 +18,7 @@ use crate::model::onnx::graph::encode;
 use crate::model::yolo::onnx::{export_yolo, ultralytics_output0, OnnxExportOptions};
 use crate::util::stats::percentile;
 use crate::util::tensor::to_host;
+use crate::util::write_atomic;
 
 /// One (variant, size): latencies in ms as (median, p10, p90).
 #[derive(Debug, Clone)]
@@ -39,11 +40,14 @@ fn stats(v: &[f64]) -> [f64; 3] {
 }
 
 /// Times `variant` at `size`: `warmup` untimed and `repeats` timed runs per engine.
+/// With `save`, the exported file is also written there as `<variant>_<size>.onnx`
+/// (for timing other runtimes on the same weights, `bench/onnx_latency.py`).
 pub fn time_engines(
     variant: &Variant,
     size: usize,
     warmup: usize,
     repeats: usize,
+    save: Option<&Path>,
 ) -> Result<EngineRow> {
     let Some(cfg) = variant.yolo_config(size) else {
         bail!("bench engines: {variant} is not a YOLO variant (only YOLO-seg exports to ONNX)");
@@ -80,6 +84,10 @@ pub fn time_engines(
         category_ids: vec![1],
     };
     let bytes = encode(&export_yolo(&model, [size, size], &opts)?);
+    if let Some(dir) = save {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        write_atomic(&dir.join(format!("{variant}_{size}.onnx")), &bytes)?;
+    }
     let eng = TractEngine::from_bytes(
         &bytes,
         Path::new(&format!("{variant}@{size}.onnx")),
@@ -117,6 +125,7 @@ pub fn bench_engines(
     warmup: usize,
     repeats: usize,
     threads: usize,
+    save: Option<&Path>,
 ) -> Result<String> {
     set_threads(threads);
     let mut s = format!(
@@ -125,7 +134,7 @@ pub fn bench_engines(
     );
     for v in variants {
         for &size in sizes {
-            let r = time_engines(v, size, warmup, repeats)?;
+            let r = time_engines(v, size, warmup, repeats, save)?;
             s.push_str(&format!(
                 "| {} | {} | {:.1} ({:.1}–{:.1}) | {:.1} ({:.1}–{:.1}) | {:.2} | {:.1e} |\n",
                 r.variant,

@@ -294,6 +294,7 @@ pub fn bench_engines_cmd(
     warmup: usize,
     repeats: usize,
     threads: Option<usize>,
+    save: Option<&Path>,
 ) -> Result<String> {
     let vs = variants
         .split(',')
@@ -306,6 +307,7 @@ pub fn bench_engines_cmd(
         warmup,
         repeats,
         threads.unwrap_or_else(all_cores),
+        save,
     )
 }
 
