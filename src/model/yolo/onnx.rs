@@ -378,8 +378,8 @@ pub fn export_yolo(
     let scores = g.sigmoid(s, &cls);
     let out0 = g.concat(s, &[&dbox, &scores, &coef], 1);
 
-    let (pst, ph, pw) = (m.strides[0] / 2, h * 2 / m.strides[0], w * 2 / m.strides[0]);
-    debug_assert!(pst > 0);
+    // Prototypes are at twice the finest head level's resolution.
+    let (ph, pw) = (h * 2 / m.strides[0], w * 2 / m.strides[0]);
     g.output(
         &out0,
         "output0",
