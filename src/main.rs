@@ -7,7 +7,8 @@ use clap::{Args, Parser, Subcommand};
 
 use chicktrain::commands::bench::{self as bench_cmd, EffortFlags};
 use chicktrain::commands::data;
-use chicktrain::commands::export::{self as export_cmd, ExportFormat};
+use chicktrain::commands::export as export_cmd;
+use chicktrain::commands::onnx as onnx_cmd;
 use chicktrain::commands::train::{self as train_cmd, SplitName};
 use chicktrain::config::DeviceKind;
 use chicktrain::eval::IouType;
@@ -63,6 +64,13 @@ impl TrainArgs {
     }
 }
 
+/// `export --format`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ExportFormatArg {
+    Onnx,
+    Safetensors,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Train a model from a config (render, mix, train, evaluate every epoch, checkpoint).
@@ -85,26 +93,45 @@ enum Command {
     },
     /// Predict masks on an image or a folder of images: overlay PNGs + COCO results JSON.
     Predict {
+        /// A best.bpk / last.bpk written by `train`.
+        #[arg(long, required_unless_present = "onnx", conflicts_with = "onnx")]
+        checkpoint: Option<PathBuf>,
+        /// An ONNX file written by `export --format onnx`, run through tract.
         #[arg(long)]
-        checkpoint: PathBuf,
+        onnx: Option<PathBuf>,
         /// An image file or a folder of .jpg/.png images.
         #[arg(long)]
         input: PathBuf,
         #[arg(long)]
         out: PathBuf,
+        /// Keep detections scoring above this.
+        #[arg(long, default_value_t = train_cmd::PREDICT_CONF)]
+        conf: f32,
+        /// Threads of the tract engine (`--onnx`; default: every core).
         #[arg(long)]
+        threads: Option<usize>,
+        #[arg(long, conflicts_with = "onnx")]
         device: Option<DeviceKind>,
     },
-    /// Export a checkpoint for other tools: `safetensors` (the weights under ultralytics'
-    /// state_dict names) or `onnx`.
+    /// Export a checkpoint for other tools: ONNX (ultralytics' layout) or safetensors.
     Export {
         #[arg(long)]
         checkpoint: PathBuf,
         #[arg(long, value_enum)]
-        format: ExportFormat,
-        /// Output file (default: the checkpoint's path with the format's extension).
+        format: ExportFormatArg,
+        /// Output file (default: the checkpoint's path with .onnx / .safetensors).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// ONNX: a symbolic batch dimension instead of a fixed one.
+        #[arg(long)]
+        dynamic: bool,
+        /// ONNX: batch size of a static graph (and of the reference input).
+        #[arg(long, default_value_t = 1)]
+        batch: usize,
+        /// ONNX: also write <out>.reference.safetensors (a seeded input and chicktrain's
+        /// outputs for it; `bench/onnx_check.py` compares ONNX Runtime against them).
+        #[arg(long)]
+        reference: bool,
     },
     /// Render auto-labelled carcass piles: images/, annotations.json (COCO), preview.png.
     Render {
@@ -247,6 +274,25 @@ enum BenchWhat {
         #[arg(long)]
         quiet: bool,
     },
+    /// Batch-1 inference latency of YOLO variants on flex vs tract (the ONNX export of
+    /// the same weights), and their max output difference.
+    Engines {
+        /// Comma-separated YOLO variants (see `bench models --help`).
+        #[arg(long, default_value = "yolo-n")]
+        variants: String,
+        #[arg(long, default_value = "256,640")]
+        sizes: String,
+        #[arg(long, default_value_t = 10)]
+        repeats: usize,
+        #[arg(long, default_value_t = 2)]
+        warmup: usize,
+        /// tract threads (default: every core; flex always uses every core).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Also write each exported file here (<variant>_<size>.onnx).
+        #[arg(long)]
+        save_onnx: Option<PathBuf>,
+    },
     /// Scene ablation: train one variant per dropped/shrunk model option, report test AP
     /// vs latency and a recommended default (runs/ablation/<config name>/).
     Ablation {
@@ -360,6 +406,21 @@ impl BenchWhat {
                 device,
                 quiet,
             }),
+            BenchWhat::Engines {
+                variants,
+                sizes,
+                repeats,
+                warmup,
+                threads,
+                save_onnx,
+            } => onnx_cmd::bench_engines_cmd(
+                &variants,
+                &sizes,
+                warmup,
+                repeats,
+                threads,
+                save_onnx.as_deref(),
+            ),
             BenchWhat::Ablation {
                 config,
                 syn,
@@ -409,15 +470,35 @@ fn run(cli: Cli) -> anyhow::Result<String> {
         }) => train_cmd::eval_cmd(&checkpoint, split, data.as_deref(), device, json),
         Some(Command::Predict {
             checkpoint,
+            onnx,
             input,
             out,
+            conf,
+            threads,
             device,
-        }) => train_cmd::predict_cmd(&checkpoint, &input, &out, device),
+        }) => match (checkpoint, onnx) {
+            (_, Some(onnx)) => onnx_cmd::predict_onnx(&onnx, &input, &out, conf, threads),
+            (Some(c), None) => train_cmd::predict_cmd(&c, &input, &out, conf, device),
+            (None, None) => anyhow::bail!("predict needs --checkpoint or --onnx"),
+        },
         Some(Command::Export {
             checkpoint,
             format,
             out,
-        }) => export_cmd::export_cmd(&checkpoint, format, out.as_deref()),
+            dynamic,
+            batch,
+            reference,
+        }) => export_cmd::export_cmd(&export_cmd::ExportRequest {
+            checkpoint,
+            format: match format {
+                ExportFormatArg::Onnx => export_cmd::ExportFormat::Onnx,
+                ExportFormatArg::Safetensors => export_cmd::ExportFormat::Safetensors,
+            },
+            out,
+            batch,
+            dynamic,
+            reference,
+        }),
         Some(Command::Render {
             out,
             count,

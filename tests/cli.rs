@@ -52,6 +52,7 @@ fn every_subcommand_has_help() {
         "train",
         "eval",
         "predict",
+        "export",
         "render",
         "bench",
         "coco-eval",

@@ -1,6 +1,7 @@
 //! Speed / accuracy measurements built on the rest of the crate: model variants × input
 //! sizes ([`models`]: parameters, GFLOPs, latency, training throughput, peak memory,
-//! checkpoint AP) and the scene ablation ([`ablation`]). Their parts: variant names
+//! checkpoint AP), the scene ablation ([`ablation`]) and flex vs tract inference latency
+//! ([`engines`]). Their parts: variant names
 //! ([`variant`]), one row's measurement ([`measure`]) in a fresh child process
 //! ([`worker`]), test AP of trained models ([`accuracy`]) and the CSV / markdown / PNG
 //! report ([`report`]), which goes through [`crate::eval::report`] and
@@ -9,6 +10,7 @@
 
 pub mod ablation;
 pub mod accuracy;
+pub mod engines;
 pub mod measure;
 pub mod models;
 pub mod report;

@@ -1,19 +1,21 @@
-//! `chicktrain export --checkpoint X.bpk --format onnx|safetensors [--out PATH]`: a trained
-//! model in a format other tools read. One file per format: [`super::export_safetensors`]
-//! (the state dict under ultralytics' names); ONNX is built in its own branch.
+//! `chicktrain export --checkpoint X.bpk --format onnx|safetensors [--out PATH]`: a
+//! checkpoint's weights in a format other tools read. Each format lives in its own file
+//! ([`super::onnx`], [`super::export_safetensors`]); this file only picks one and the
+//! default output path. Both write atomically: a failed export leaves no partial file.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 
+use super::onnx::{export_onnx, OnnxExport};
 use crate::train::checkpoint::Checkpoint;
 
-/// Output format of `chicktrain export`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+/// The formats `export` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExportFormat {
-    /// The inference graph (ONNX Runtime, OpenVINO, TensorRT).
+    /// The inference graph in ultralytics' ONNX layout (YOLO-seg).
     Onnx,
-    /// The weights under ultralytics' state_dict names (`model.load_state_dict`).
+    /// The state dict under ultralytics' / torchvision's key names.
     Safetensors,
 }
 
@@ -26,22 +28,44 @@ impl ExportFormat {
     }
 }
 
-/// Exports `checkpoint` to `out` (default: beside the checkpoint, `best.bpk` →
-/// `best.safetensors`, as ultralytics names `best.onnx` after `best.pt`). The file is written
-/// atomically: a failed export leaves no partial file.
-pub fn export_cmd(checkpoint: &Path, format: ExportFormat, out: Option<&Path>) -> Result<String> {
-    let out: PathBuf = out
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| checkpoint.with_extension(format.extension()));
-    if out == checkpoint {
+/// What `export` was asked for.
+#[derive(Debug, Clone)]
+pub struct ExportRequest {
+    pub checkpoint: PathBuf,
+    pub format: ExportFormat,
+    /// Default: the checkpoint's path with the format's extension (`best.bpk` →
+    /// `best.onnx`), as ultralytics writes `best.onnx` beside `best.pt`.
+    pub out: Option<PathBuf>,
+    /// ONNX: batch size of the graph (and of the reference input).
+    pub batch: usize,
+    /// ONNX: symbolic batch dimension.
+    pub dynamic: bool,
+    /// ONNX: also write `<out>.reference.safetensors` (input + chicktrain's outputs).
+    pub reference: bool,
+}
+
+/// Output path of an export.
+pub fn out_path(checkpoint: &Path, format: ExportFormat, out: Option<&Path>) -> PathBuf {
+    out.map(Path::to_path_buf)
+        .unwrap_or_else(|| checkpoint.with_extension(format.extension()))
+}
+
+pub fn export_cmd(r: &ExportRequest) -> Result<String> {
+    let out = out_path(&r.checkpoint, r.format, r.out.as_deref());
+    if out == r.checkpoint {
         bail!("--out {} would overwrite the checkpoint", out.display());
     }
-    let ckpt = Checkpoint::load(checkpoint)?;
-    match format {
-        ExportFormat::Safetensors => super::export_safetensors::export(&ckpt, checkpoint, &out),
-        ExportFormat::Onnx => bail!(
-            "ONNX export is not built in this branch (it comes with the `onnx` branch); \
-             `--format safetensors` is"
-        ),
+    match r.format {
+        ExportFormat::Onnx => export_onnx(&OnnxExport {
+            checkpoint: r.checkpoint.clone(),
+            out,
+            batch: r.batch,
+            dynamic: r.dynamic,
+            reference: r.reference,
+        }),
+        ExportFormat::Safetensors => {
+            let ckpt = Checkpoint::load(&r.checkpoint)?;
+            super::export_safetensors::export(&ckpt, &r.checkpoint, &out)
+        }
     }
 }

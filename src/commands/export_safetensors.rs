@@ -18,8 +18,8 @@ use crate::util::safetensors;
 pub fn export(ckpt: &Checkpoint, from: &Path, out: &Path) -> Result<String> {
     let DetectorConfig::Yolo(cfg) = &ckpt.header.model else {
         bail!(
-            "{}: safetensors export of Mask R-CNN (torchvision key names) is not built in this \
-             branch; YOLO checkpoints export",
+            "{}: safetensors export writes YOLO checkpoints (ultralytics' key names); \
+             Mask R-CNN export under torchvision's key names is not implemented yet",
             from.display()
         );
     };

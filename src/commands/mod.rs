@@ -1,7 +1,8 @@
 //! Every command of the binary, as a library function that returns the text to print
 //! (so tests call them directly; `main.rs` only parses flags): [`data`] (render,
 //! convert, coco-eval, render/COCO benches), [`train`] (train, eval, predict),
-//! [`export`] (weights out) and [`bench`] (model bench, ablation, sweep).
+//! [`bench`] (model bench, ablation, sweep), [`export`] (checkpoint → other formats) and
+//! [`onnx`] (ONNX export and `predict --onnx`).
 
 #[cfg(feature = "train")]
 pub mod bench;
@@ -10,5 +11,7 @@ pub mod data;
 pub mod export;
 #[cfg(feature = "train")]
 pub mod export_safetensors;
+#[cfg(feature = "train")]
+pub mod onnx;
 #[cfg(feature = "train")]
 pub mod train;

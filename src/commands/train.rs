@@ -20,7 +20,7 @@ use crate::train::evaluate::{push_planes, score_checkpoint, to_coco};
 use crate::train::run_files::StatsRecord;
 use crate::train::trainer::{train, TrainOptions, TrainSummary};
 
-/// Confidence threshold of `predict` (ultralytics' predict default).
+/// Default confidence threshold of `predict` (ultralytics' predict default).
 pub const PREDICT_CONF: f32 = 0.25;
 
 /// One line per COCO stat block, pycocotools names.
@@ -157,6 +157,7 @@ pub fn predict_cmd(
     checkpoint: &Path,
     input: &Path,
     out_dir: &Path,
+    conf: f32,
     device: Option<DeviceKind>,
 ) -> Result<String> {
     let ck = Checkpoint::load(checkpoint)?;
@@ -164,7 +165,35 @@ pub fn predict_cmd(
     let model = ck
         .model("ema", &dev)
         .with_context(|| format!("in checkpoint {}", checkpoint.display()))?;
-    let size = ck.header.model.input_size() as u32;
+    let size = ck.header.model.input_size();
+    let classes = PredictClasses {
+        category_ids: ck.header.category_ids.clone(),
+        names: ck.header.class_names.clone(),
+    };
+    predict_images(input, out_dir, size as u32, &classes, conf, &mut |px| {
+        let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &dev);
+        Ok(model.predict(x, conf).swap_remove(0))
+    })
+}
+
+/// Category ids and names of a model's classes (index = class).
+pub struct PredictClasses {
+    pub category_ids: Vec<u64>,
+    pub names: Vec<String>,
+}
+
+/// The body of `predict` for any engine: letterboxes each image of `input` to
+/// `size × size`, hands its `[1, 3, size, size]` planes to `infer` (detections with score
+/// > `conf` at the input size), maps them back to the image and writes the overlays,
+/// `results.json` and `images.json` into `out_dir`.
+pub fn predict_images(
+    input: &Path,
+    out_dir: &Path,
+    size: u32,
+    classes: &PredictClasses,
+    conf: f32,
+    infer: &mut dyn FnMut(Vec<f32>) -> Result<Vec<crate::model::detection::Detection>>,
+) -> Result<String> {
     let files = list_images(input)?;
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create {}", out_dir.display()))?;
@@ -176,15 +205,11 @@ pub fn predict_cmd(
         let small = Letterbox::new((w, h), size).image(&img);
         let mut px = Vec::new();
         push_planes(&small, &mut px);
-        let x = Tensor::<4>::from_data(
-            TensorData::new(px, [1, 3, size as usize, size as usize]),
-            &dev,
-        );
-        let raw = model.predict(x, PREDICT_CONF);
+        let raw = infer(px).with_context(|| format!("on {}", f.display()))?;
         let id = k as u64 + 1;
-        let dets: Vec<Detection> = raw[0]
+        let dets: Vec<Detection> = raw
             .iter()
-            .map(|d| to_coco(d, id, &ck.header.category_ids, size, (w, h)))
+            .map(|d| to_coco(d, id, &classes.category_ids, size, (w, h)))
             .collect();
         let ov = overlay(&img, &dets)?;
         let stem = f
@@ -199,10 +224,10 @@ pub fn predict_cmd(
     save_results(&out_dir.join("results.json"), &all)?;
     crate::util::write_atomic(
         &out_dir.join("images.json"),
-        serde_json::to_string_pretty(&json!({"images": images, "categories": ck.header.category_ids.iter().zip(&ck.header.class_names).map(|(i, n)| json!({"id": i, "name": n})).collect::<Vec<_>>()}))?.as_bytes(),
+        serde_json::to_string_pretty(&json!({"images": images, "categories": classes.category_ids.iter().zip(&classes.names).map(|(i, n)| json!({"id": i, "name": n})).collect::<Vec<_>>()}))?.as_bytes(),
     )?;
     Ok(format!(
-        "{} images, {} detections (score > {PREDICT_CONF}); overlays, results.json (COCO results) and images.json (image ids) in {}",
+        "{} images, {} detections (score > {conf}); overlays, results.json (COCO results) and images.json (image ids) in {}",
         files.len(),
         all.len(),
         out_dir.display()

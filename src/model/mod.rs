@@ -10,6 +10,7 @@
 //! - [`weights`]: weights from files (chicktrain checkpoints, PyTorch, safetensors) as
 //!   named snapshots, and the one loader that applies them with shape checks; `freeze`
 //!   (the first N stages of either family).
+//! - [`onnx`]: the ONNX graph writer and the tract engine that runs exported files.
 //!
 //! Models read their ground truth as [`crate::data::targets::Targets`] and nothing of the
 //! trainer: every model is built from its own typed config.
@@ -20,6 +21,7 @@ pub mod instance_mask;
 pub mod layers;
 pub mod loss;
 pub mod maskrcnn;
+pub mod onnx;
 pub mod summary;
 pub mod weights;
 pub mod yolo;

@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use chicktrain::commands::train::{eval_cmd, predict_cmd, SplitName};
+use chicktrain::commands::train::{eval_cmd, predict_cmd, SplitName, PREDICT_CONF};
 use chicktrain::config::{self, Config};
 use chicktrain::train::run_files::{read_metrics, read_test, EpochRecord, StatsRecord};
 use chicktrain::train::smoke::smoke_config;
@@ -128,7 +128,7 @@ pub fn smoke_scenario(dir: &Path, config: &str, loss_names: &[&str]) -> SmokeRun
     image::RgbImage::from_pixel(80, 60, image::Rgb([200, 180, 150]))
         .save(img_dir.join("a.png"))
         .unwrap();
-    predict_cmd(&best, &img_dir, &dir.join("pred"), None).unwrap();
+    predict_cmd(&best, &img_dir, &dir.join("pred"), PREDICT_CONF, None).unwrap();
     assert!(dir.join("pred/a.png").is_file());
     chicktrain::annotations::coco::load_results(&dir.join("pred/results.json")).unwrap();
 

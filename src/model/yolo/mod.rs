@@ -6,6 +6,7 @@
 //! - [`postprocess`]: decoding, class-wise NMS and mask assembly for inference.
 //! - [`ultralytics`]: ultralytics `state_dict` names ↔ ours, weights in (`.pt`, safetensors)
 //!   and out.
+//! - [`onnx`]: ONNX export in ultralytics' output layout.
 //!
 //! This module defines the model config ([`YoloSegConfig`]), the model ([`YoloSeg`]) and its
 //! output ([`YoloOutput`]). It reads no training config.
@@ -17,6 +18,7 @@ pub mod blocks;
 pub mod head;
 pub mod loss;
 pub mod neck;
+pub mod onnx;
 pub mod postprocess;
 pub mod scale;
 pub mod ultralytics;

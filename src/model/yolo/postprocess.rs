@@ -89,6 +89,68 @@ pub fn postprocess(out: &YoloOutput, conf: f32, iou: f32, max_det: usize) -> Vec
         .collect()
 }
 
+/// The same postprocess on ultralytics' ONNX layout (what an exported file outputs, see
+/// [`super::onnx`]): `output0` `[B, 4 + nc + nm, A]` with xywh boxes in input pixels and
+/// sigmoid scores, `proto` `[B, nm, ph, pw]`, both row-major; `input = [H, W]`.
+pub fn postprocess_layout(
+    output0: (&[f32], [usize; 3]),
+    proto: (&[f32], [usize; 4]),
+    num_classes: usize,
+    input: [usize; 2],
+    (conf, iou, max_det): (f32, f32, usize),
+) -> Vec<Vec<Detection>> {
+    let (y, [b, no, na]) = output0;
+    let (proto, [_, nm, ph, pw]) = proto;
+    let nc = num_classes;
+    debug_assert_eq!(no, 4 + nc + nm);
+    let at = |i: usize, ch: usize, a: usize| y[(i * no + ch) * na + a];
+    (0..b)
+        .map(|i| {
+            let mut cands = Vec::new();
+            let mut anchor_of = Vec::new();
+            for a in 0..na {
+                let (mut best, mut cls) = (f32::NEG_INFINITY, 0);
+                for c in 0..nc {
+                    let p = at(i, 4 + c, a);
+                    if p > best {
+                        best = p;
+                        cls = c;
+                    }
+                }
+                if best <= conf {
+                    continue;
+                }
+                let (cx, cy, w, h) = (at(i, 0, a), at(i, 1, a), at(i, 2, a), at(i, 3, a));
+                let bx = [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
+                cands.push((bx, best, cls));
+                anchor_of.push(a);
+            }
+            let keep = nms(&cands, iou, max_det);
+            let protos = Arc::new(Prototypes {
+                data: proto[i * nm * ph * pw..(i + 1) * nm * ph * pw].to_vec(),
+                channels: nm,
+                height: ph,
+                width: pw,
+                stride: (input[0] / ph.max(1)).max(1),
+            });
+            keep.iter()
+                .map(|&k| {
+                    let (bx, score, class) = cands[k];
+                    Detection {
+                        bbox: [bx[0], bx[1], bx[2] - bx[0], bx[3] - bx[1]],
+                        score,
+                        class,
+                        mask: MaskSource::Prototypes {
+                            coef: (0..nm).map(|m| at(i, 4 + nc + m, anchor_of[k])).collect(),
+                            protos: protos.clone(),
+                        },
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

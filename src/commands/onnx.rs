@@ -1,0 +1,343 @@
+//! The ONNX side of `export` and `predict --onnx`: a checkpoint's YOLO-seg as an ONNX
+//! file in ultralytics' layout (optionally with a reference input and chicktrain's own
+//! outputs for it, which `bench/onnx_check.py` compares against ONNX Runtime), and
+//! predictions from such a file through tract with the same postprocess and outputs as
+//! `predict --checkpoint`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, ensure, Context, Result};
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::train::{predict_images, PredictClasses};
+use crate::bench::engines::bench_engines;
+use crate::bench::models::parse_sizes;
+use crate::bench::variant::Variant;
+use crate::model::onnx::engine::{set_threads, TractEngine};
+use crate::model::onnx::graph::encode;
+use crate::model::yolo::onnx::{export_yolo, ultralytics_output0, OnnxExportOptions};
+use crate::model::yolo::postprocess::postprocess_layout;
+use crate::train::checkpoint::Checkpoint;
+use crate::train::detector::Detector;
+use crate::train::evaluate::{VAL_IOU, VAL_MAX_DET};
+use crate::util::tensor::to_host;
+use crate::util::write_atomic;
+
+/// Options of `export --format onnx`.
+#[derive(Debug, Clone)]
+pub struct OnnxExport {
+    pub checkpoint: PathBuf,
+    pub out: PathBuf,
+    pub batch: usize,
+    pub dynamic: bool,
+    /// Also write `<out>.reference.safetensors`: a seeded input and chicktrain's outputs.
+    pub reference: bool,
+}
+
+/// Seed of the reference input (uniform [0, 1] pixels).
+pub const REFERENCE_SEED: u64 = 0;
+
+/// Path of the reference file next to an exported `model.onnx`.
+pub fn reference_path(onnx: &Path) -> PathBuf {
+    onnx.with_extension("reference.safetensors")
+}
+
+/// `chicktrain export --checkpoint X.bpk --format onnx [--out Y.onnx]`.
+pub fn export_onnx(r: &OnnxExport) -> Result<String> {
+    let ck = Checkpoint::load(&r.checkpoint)?;
+    let dev = Device::flex();
+    let model = ck
+        .model("ema", &dev)
+        .with_context(|| format!("in checkpoint {}", r.checkpoint.display()))?;
+    let yolo = match &model {
+        Detector::Yolo(m) => m,
+        Detector::MaskRcnn(_) => bail!(
+            "{}: ONNX export of Mask R-CNN is not implemented yet (only YOLO-seg exports; \
+             the backbone + FPN + RPN + heads graph with RoIAlign is what is left)",
+            r.checkpoint.display()
+        ),
+    };
+    let size = ck.header.model.input_size();
+    let opts = OnnxExportOptions {
+        batch: r.batch,
+        dynamic: r.dynamic,
+        names: ck.header.class_names.clone(),
+        category_ids: ck.header.category_ids.clone(),
+    };
+    let proto = export_yolo(yolo, [size, size], &opts)
+        .with_context(|| format!("exporting {}", r.checkpoint.display()))?;
+    let bytes = encode(&proto);
+    write_atomic(&r.out, &bytes)?;
+    let mut msg = format!(
+        "{} → {} ({:.1} MB, opset 17, input images [{}, 3, {size}, {size}], outputs output0 [B, {}, A] and output1 (prototypes))",
+        r.checkpoint.display(),
+        r.out.display(),
+        bytes.len() as f64 / 1e6,
+        if r.dynamic { "batch".to_string() } else { r.batch.to_string() },
+        4 + yolo.num_classes() + yolo.head.num_masks,
+    );
+    if r.reference {
+        let b = r.batch;
+        let mut rng = ChaCha8Rng::seed_from_u64(REFERENCE_SEED);
+        let x: Vec<f32> = (0..b * 3 * size * size)
+            .map(|_| rng.random::<f32>())
+            .collect();
+        let out = yolo.forward(Tensor::<4>::from_data(
+            TensorData::new(x.clone(), [b, 3, size, size]),
+            &dev,
+        ));
+        let (y0, s0) = ultralytics_output0(&out);
+        let s1 = out.proto.dims();
+        let y1 = to_host(out.proto);
+        let path = reference_path(&r.out);
+        let file = safetensors_f32(&[
+            ("images", &[b, 3, size, size], &x),
+            ("output0", &s0, &y0),
+            ("output1", &s1, &y1),
+        ]);
+        write_atomic(&path, &file)?;
+        msg.push_str(&format!(
+            "\nreference input (seed {REFERENCE_SEED}) and chicktrain's outputs: {}",
+            path.display()
+        ));
+    }
+    Ok(msg)
+}
+
+/// A safetensors file of float32 tensors (8-byte little-endian header length, JSON
+/// header, raw data): the one format both Rust and NumPy read without a pickle.
+fn safetensors_f32(tensors: &[(&str, &[usize], &[f32])]) -> Vec<u8> {
+    let mut header = serde_json::Map::new();
+    let mut off = 0usize;
+    for (name, shape, data) in tensors {
+        assert_eq!(shape.iter().product::<usize>(), data.len(), "{name}");
+        let end = off + 4 * data.len();
+        header.insert(
+            name.to_string(),
+            serde_json::json!({"dtype": "F32", "shape": shape, "data_offsets": [off, end]}),
+        );
+        off = end;
+    }
+    let mut h = serde_json::to_vec(&header).expect("a JSON map serialises");
+    while h.len() % 8 != 0 {
+        h.push(b' ');
+    }
+    let mut out = Vec::with_capacity(8 + h.len() + off);
+    out.extend_from_slice(&(h.len() as u64).to_le_bytes());
+    out.extend_from_slice(&h);
+    for (_, _, data) in tensors {
+        for v in *data {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    out
+}
+
+/// What `predict --onnx` needs to know about an exported file, read from it.
+struct OnnxModelInfo {
+    size: usize,
+    num_classes: usize,
+    classes: PredictClasses,
+}
+
+fn model_info(eng: &TractEngine) -> Result<OnnxModelInfo> {
+    let p = eng.path.display();
+    let s = &eng.input_shape;
+    ensure!(
+        s.len() == 4 && s[1] == Some(3),
+        "{p}: input must be [B, 3, H, W], the file declares {s:?}"
+    );
+    let (h, w) = match (s[2], s[3]) {
+        (Some(h), Some(w)) => (h, w),
+        _ => bail!("{p}: input height and width must be fixed (the file declares {s:?})"),
+    };
+    ensure!(
+        h == w,
+        "{p}: predict letterboxes to a square input; this file's is {h}×{w}"
+    );
+    let g = eng.proto.graph.as_ref().expect("checked at load");
+    ensure!(
+        g.output.len() == 2,
+        "{p}: expected two outputs (output0, output1) of a segmentation export, found {}",
+        g.output.len()
+    );
+    // Class names from ultralytics' `names` metadata ({0: 'a', 1: 'b'}).
+    let names_meta = eng
+        .metadata("names")
+        .with_context(|| format!("{p}: no `names` metadata (not an ultralytics-layout export)"))?;
+    let names = parse_names(names_meta).with_context(|| format!("{p}: metadata names"))?;
+    let ids: Vec<u64> = match eng.metadata("chicktrain_category_ids") {
+        Some(v) => serde_json::from_str(v)
+            .with_context(|| format!("{p}: metadata chicktrain_category_ids {v:?}"))?,
+        None => (1..=names.len() as u64).collect(),
+    };
+    ensure!(
+        ids.len() == names.len(),
+        "{p}: {} category ids for {} names",
+        ids.len(),
+        names.len()
+    );
+    Ok(OnnxModelInfo {
+        size: h,
+        num_classes: names.len(),
+        classes: PredictClasses {
+            category_ids: ids,
+            names,
+        },
+    })
+}
+
+/// Parses the Python dict literal ultralytics writes for `names` (`{0: 'a', 1: "b"}`).
+fn parse_names(s: &str) -> Result<Vec<String>> {
+    let body = s
+        .trim()
+        .strip_prefix('{')
+        .and_then(|b| b.strip_suffix('}'))
+        .with_context(|| format!("{s:?} is not a {{index: 'name'}} dict"))?;
+    let mut out = Vec::new();
+    let mut chars = body.chars().peekable();
+    loop {
+        while chars.peek().is_some_and(|c| c.is_whitespace() || *c == ',') {
+            chars.next();
+        }
+        if chars.peek().is_none() {
+            break;
+        }
+        let idx: String = chars.by_ref().take_while(|c| *c != ':').collect();
+        let idx: usize = idx
+            .trim()
+            .parse()
+            .with_context(|| format!("bad class index {idx:?} in {s:?}"))?;
+        ensure!(
+            idx == out.len(),
+            "class indices in {s:?} are not 0, 1, 2, …"
+        );
+        while chars.peek().is_some_and(|c| c.is_whitespace()) {
+            chars.next();
+        }
+        let q = chars.next().filter(|c| *c == '\'' || *c == '"');
+        let q = q.with_context(|| format!("class {idx} in {s:?} is not a quoted string"))?;
+        let mut name = String::new();
+        loop {
+            match chars.next() {
+                Some('\\') => match chars.next() {
+                    Some('n') => name.push('\n'),
+                    Some(c) => name.push(c),
+                    None => bail!("unterminated class name in {s:?}"),
+                },
+                Some(c) if c == q => break,
+                Some(c) => name.push(c),
+                None => bail!("unterminated class name in {s:?}"),
+            }
+        }
+        out.push(name);
+    }
+    ensure!(!out.is_empty(), "no class names in {s:?}");
+    Ok(out)
+}
+
+/// `chicktrain predict --onnx model.onnx --input IMG_OR_DIR --out DIR`: the exported
+/// file through tract, ultralytics-layout postprocess, the outputs of `predict`.
+pub fn predict_onnx(
+    onnx: &Path,
+    input: &Path,
+    out_dir: &Path,
+    conf: f32,
+    threads: Option<usize>,
+) -> Result<String> {
+    set_threads(threads.unwrap_or_else(all_cores));
+    let eng = TractEngine::load(onnx, Some(1))?;
+    let info = model_info(&eng)?;
+    let size = info.size;
+    let nc = info.num_classes;
+    let text = predict_images(
+        input,
+        out_dir,
+        size as u32,
+        &info.classes,
+        conf,
+        &mut |px| {
+            let out = eng.run(&[1, 3, size, size], &px)?;
+            let (o0, o1) = (&out[0], &out[1]);
+            ensure!(
+                o0.shape.len() == 3 && o1.shape.len() == 4 && o0.shape[1] == 4 + nc + o1.shape[1],
+                "{}: outputs {:?} and {:?} are not [1, 4 + {nc} + nm, A] and [1, nm, H, W]",
+                onnx.display(),
+                o0.shape,
+                o1.shape
+            );
+            let s0 = [o0.shape[0], o0.shape[1], o0.shape[2]];
+            let s1 = [o1.shape[0], o1.shape[1], o1.shape[2], o1.shape[3]];
+            Ok(postprocess_layout(
+                (&o0.data, s0),
+                (&o1.data, s1),
+                nc,
+                [size, size],
+                (conf, VAL_IOU, VAL_MAX_DET),
+            )
+            .swap_remove(0))
+        },
+    )?;
+    Ok(format!("{text} (tract, {})", onnx.display()))
+}
+
+fn all_cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// `chicktrain bench engines --variants yolo-n --sizes 256,640`: flex vs tract latency.
+pub fn bench_engines_cmd(
+    variants: &str,
+    sizes: &str,
+    warmup: usize,
+    repeats: usize,
+    threads: Option<usize>,
+    save: Option<&Path>,
+) -> Result<String> {
+    let vs = variants
+        .split(',')
+        .map(|v| v.trim().parse())
+        .collect::<Result<Vec<Variant>>>()?;
+    let sizes = parse_sizes(sizes)?;
+    bench_engines(
+        &vs,
+        &sizes,
+        warmup,
+        repeats,
+        threads.unwrap_or_else(all_cores),
+        save,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_parse_as_python_writes_them() {
+        assert_eq!(parse_names("{0: 'carcass'}").unwrap(), ["carcass"]);
+        assert_eq!(
+            parse_names(r#"{0: 'a', 1: "b c", 2: 'it\'s'}"#).unwrap(),
+            ["a", "b c", "it's"]
+        );
+        assert!(parse_names("{1: 'a'}")
+            .unwrap_err()
+            .to_string()
+            .contains("not 0, 1, 2"));
+        assert!(parse_names("['a']").is_err());
+        assert!(parse_names("{0: a}").is_err());
+    }
+
+    #[test]
+    fn safetensors_layout() {
+        let f = safetensors_f32(&[("x", &[2], &[1.0, 2.0]), ("y", &[1, 1], &[3.0])]);
+        let n = u64::from_le_bytes(f[..8].try_into().unwrap()) as usize;
+        assert_eq!(n % 8, 0);
+        let h: serde_json::Value = serde_json::from_slice(&f[8..8 + n]).unwrap();
+        assert_eq!(h["y"]["data_offsets"], serde_json::json!([8, 12]));
+        assert_eq!(f.len(), 8 + n + 12);
+        assert_eq!(&f[8 + n + 8..], &3.0f32.to_le_bytes());
+    }
+}
