@@ -50,7 +50,13 @@ fn boxes(v: &Value) -> Vec<[f32; 4]> {
         .as_array()
         .unwrap()
         .iter()
-        .flat_map(|b| if b.is_array() { floats(b) } else { floats(&Value::Array(vec![b.clone()])) })
+        .flat_map(|b| {
+            if b.is_array() {
+                floats(b)
+            } else {
+                floats(&Value::Array(vec![b.clone()]))
+            }
+        })
         .collect();
     flat.chunks(4).map(|b| b.try_into().unwrap()).collect()
 }
@@ -120,7 +126,12 @@ fn yolo_masks_match_ultralytics_process_mask_native() {
             // Boxes: Letterbox::unbox_xyxy is ultralytics' scale_boxes (f64 here, f32 there).
             let b = lb.unbox_xyxy(c.boxes_input[k].map(|v| v as f64));
             for (got, want) in b.iter().zip(c.boxes_orig[k]) {
-                assert!((got - want as f64).abs() < 1e-3, "{:?}: box {k}: {b:?} vs {:?}", c.orig, c.boxes_orig[k]);
+                assert!(
+                    (got - want as f64).abs() < 1e-3,
+                    "{:?}: box {k}: {b:?} vs {:?}",
+                    c.orig,
+                    c.boxes_orig[k]
+                );
             }
             let want = from_runs(&c.case["native_runs"][k], c.orig);
             let got = prototype_mask(coef, &c.protos, c.orig, c.boxes_orig[k]);
@@ -137,7 +148,12 @@ fn yolo_masks_match_ultralytics_process_mask_native() {
             // At the input size: process_mask(..., upsample=True).
             let want = from_runs(&c.case["input_runs"][k], (c.input, c.input));
             let got = prototype_mask(coef, &c.protos, (c.input, c.input), c.boxes_input[k]).full();
-            assert_eq!(differing(&got, &want), 0, "{:?} detection {k} at the input", c.orig);
+            assert_eq!(
+                differing(&got, &want),
+                0,
+                "{:?} detection {k} at the input",
+                c.orig
+            );
             checked += 1;
         }
     }
@@ -203,7 +219,65 @@ fn to_coco_decodes_at_the_original_size() {
             let want = prototype_mask(coef, &c.protos, c.orig, bx).full();
             assert_eq!(rle.decode(), want, "{:?} detection {k}", c.orig);
             let reference = from_runs(&c.case["native_runs"][k], c.orig);
-            assert_eq!(differing(&want, &reference), 0, "{:?} detection {k}", c.orig);
+            assert_eq!(
+                differing(&want, &reference),
+                0,
+                "{:?} detection {k}",
+                c.orig
+            );
         }
     }
+}
+
+#[test]
+fn to_coco_pastes_roi_masks_at_the_original_size() {
+    // Mask R-CNN through the eval path: boxes at a letterboxed 64 px input, pasted into
+    // the 150 × 90 original inside the box mapped back.
+    let doc = load();
+    let c = &doc["maskrcnn"][0];
+    let o = ints(&c["orig"]);
+    let orig = (o[0], o[1]);
+    let m = c["mask_size"].as_u64().unwrap() as usize;
+    let probs = floats(&c["probs"]);
+    let lb = Letterbox::new(orig, 64);
+    let (sx, sy) = (
+        lb.inner.0 as f32 / orig.0 as f32,
+        lb.inner.1 as f32 / orig.1 as f32,
+    );
+    let mut pasted = 0;
+    for (k, bx) in boxes(&c["boxes"]).into_iter().enumerate() {
+        let b = [
+            bx[0] * sx + lb.pad.0 as f32,
+            bx[1] * sy + lb.pad.1 as f32,
+            bx[2] * sx + lb.pad.0 as f32,
+            bx[3] * sy + lb.pad.1 as f32,
+        ];
+        let p = probs[k * m * m..(k + 1) * m * m].to_vec();
+        let d = Detection {
+            bbox: [b[0], b[1], b[2] - b[0], b[3] - b[1]],
+            score: 0.9,
+            class: 0,
+            mask: MaskSource::RoiProbs {
+                probs: p.clone(),
+                size: m,
+                threshold: 0.5,
+            },
+        };
+        let coco = to_coco(&d, 1, &[1], 64, orig);
+        let got = coco
+            .segmentation
+            .unwrap()
+            .to_rle(orig.1, orig.0)
+            .unwrap()
+            .decode();
+        let back = lb.unbox_xyxy(b.map(|v| v as f64)).map(|v| v as f32);
+        assert_eq!(
+            got,
+            paste_roi_mask(&p, m, back, orig, 0.5).full(),
+            "mask {k}"
+        );
+        assert_eq!((got.width, got.height), orig);
+        pasted += usize::from(got.area() > 0);
+    }
+    assert_eq!(pasted, 5);
 }

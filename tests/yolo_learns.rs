@@ -86,10 +86,7 @@ fn tiny_model_learns_on_flex() {
         }
         for gt in &img.masks {
             total += 1;
-            let best = masks
-                .iter()
-                .map(|m| mask_iou(m, gt))
-                .fold(0.0, f32::max);
+            let best = masks.iter().map(|m| mask_iou(m, gt)).fold(0.0, f32::max);
             found += usize::from(best >= 0.5);
         }
     }

@@ -409,7 +409,9 @@ mod tests {
         // a fixed-seed LCG.
         let mut state = 0x2545_F491_4F6C_DD1Du64;
         let mut bit = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (state >> 61) & 1 == 1
         };
         let (w, h) = (9u32, 7u32);
@@ -434,7 +436,11 @@ mod tests {
                     window: Mask::from_row_major(wh, ww, data).unwrap(),
                 };
                 let full = c.full();
-                assert_eq!(Rle::encode_cropped(&c), Rle::encode(&full), "{x0} {y0} {ww} {wh}");
+                assert_eq!(
+                    Rle::encode_cropped(&c),
+                    Rle::encode(&full),
+                    "{x0} {y0} {ww} {wh}"
+                );
                 assert_eq!(c.area(), full.area());
             }
         }

@@ -159,6 +159,14 @@ mod tests {
     }
 
     #[test]
+    fn sizes_round_half_to_even_as_ultralytics() {
+        // 333 × 0.5 = 166.5: Python's round (ultralytics' LetterBox) gives 166, not 167.
+        let lb = Letterbox::new((333, 512), 256);
+        assert_eq!((lb.inner, lb.pad), ((166, 256), (45, 0)));
+        assert_eq!(Letterbox::new((335, 512), 256).inner, (168, 256));
+    }
+
+    #[test]
     fn tall_and_tiny_images() {
         let lb = Letterbox::new((30, 90), 64);
         assert_eq!(lb.inner, (21, 64));

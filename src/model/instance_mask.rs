@@ -75,7 +75,7 @@ fn box_range(a: f32, b: f32, n: u32) -> (u32, u32) {
     }
     let lo = a.max(0.0).ceil();
     let hi = b.min(n as f32).ceil();
-    if !(lo < hi) {
+    if lo >= hi {
         return (0, 0);
     }
     (lo as u32, (hi as u32).min(n))
@@ -119,7 +119,8 @@ pub fn prototype_mask(
     // process_mask_native: the pre-upsampling factor f.
     let (hf, wf) = (h as f64, w as f64);
     let gain = (s as f64 * mh as f64 / hf).min(s as f64 * mw as f64 / wf);
-    let pad = (s * mh as i64 - py_round(hf * gain).max(1)) | (s * mw as i64 - py_round(wf * gain).max(1));
+    let pad =
+        (s * mh as i64 - py_round(hf * gain).max(1)) | (s * mw as i64 - py_round(wf * gain).max(1));
     let f = (s / gcd(s, pad | (pad / 2))).max(1) as usize;
     // scale_masks on the f-upsampled map: crop the padding.
     let (ah, aw) = (f * mh, f * mw);
@@ -166,7 +167,9 @@ pub fn prototype_mask(
             }
         }
     }
-    let lerp2 = |at: &dyn Fn(usize, usize) -> f32, (r0, r1, fy): (usize, usize, f32), (c0, c1, fx): (usize, usize, f32)| {
+    let lerp2 = |at: &dyn Fn(usize, usize) -> f32,
+                 (r0, r1, fy): (usize, usize, f32),
+                 (c0, c1, fx): (usize, usize, f32)| {
         let top = at(r0, c0) * (1.0 - fx) + at(r0, c1) * fx;
         let bot = at(r1, c0) * (1.0 - fx) + at(r1, c1) * fx;
         top * (1.0 - fy) + bot * fy
@@ -325,7 +328,10 @@ mod tests {
     fn paste_full_map_fills_the_box() {
         let prob = vec![1.0f32; 28 * 28];
         let m = paste_roi_mask(&prob, 28, [4.0, 2.0, 12.0, 10.0], (16, 16), 0.5);
-        assert_eq!((m.x0, m.y0, m.window.width, m.window.height), (3, 1, 10, 10));
+        assert_eq!(
+            (m.x0, m.y0, m.window.width, m.window.height),
+            (3, 1, 10, 10)
+        );
         let m = m.full();
         for y in 0..16 {
             for x in 0..16 {
@@ -333,8 +339,16 @@ mod tests {
                 assert_eq!(m.get(x, y), inside, "pixel ({x}, {y})");
             }
         }
-        for bx in [[4.0, 2.0, 4.0, 9.0], [f32::NAN, 0.0, 3.0, 3.0], [30.0, 30.0, 40.0, 40.0]] {
-            assert_eq!(paste_roi_mask(&prob, 28, bx, (16, 16), 0.5).area(), 0, "{bx:?}");
+        for bx in [
+            [4.0, 2.0, 4.0, 9.0],
+            [f32::NAN, 0.0, 3.0, 3.0],
+            [30.0, 30.0, 40.0, 40.0],
+        ] {
+            assert_eq!(
+                paste_roi_mask(&prob, 28, bx, (16, 16), 0.5).area(),
+                0,
+                "{bx:?}"
+            );
         }
     }
 

@@ -164,7 +164,8 @@ pub fn predict_ids(
         for ((&id, orig), per) in chunk.iter().zip(&origs).zip(&raw) {
             let keys: Vec<(f32, usize)> = per.iter().map(|d| (d.score, d.class)).collect();
             let read = coco_reads(&keys, COCO_MAX_DETS);
-            let kept: Vec<&RawDetection> = per.iter().zip(read).filter(|x| x.1).map(|x| x.0).collect();
+            let kept: Vec<&RawDetection> =
+                per.iter().zip(read).filter(|x| x.1).map(|x| x.0).collect();
             dets.par_extend(
                 kept.par_iter()
                     .map(|d| to_coco(d, id, &set.cat_ids, size as u32, *orig)),
@@ -326,7 +327,9 @@ mod tests {
         .unwrap();
         let mut state = 0x9E37_79B9_7F4A_7C15u64;
         let mut next = move |m: u64| {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (state >> 33) % m
         };
         let (mut all, mut kept) = (Vec::new(), Vec::new());
@@ -350,7 +353,11 @@ mod tests {
                 .collect();
             let read = coco_reads(&keys, COCO_MAX_DETS);
             for c in [1, 2] {
-                let n = read.iter().zip(&keys).filter(|(r, k)| **r && k.1 == c).count();
+                let n = read
+                    .iter()
+                    .zip(&keys)
+                    .filter(|(r, k)| **r && k.1 == c)
+                    .count();
                 assert_eq!(n, COCO_MAX_DETS, "image {image_id} class {c}");
             }
             kept.extend(dets.iter().zip(&read).filter(|x| *x.1).map(|x| x.0.clone()));

@@ -593,7 +593,10 @@ mod tests {
         // 3 epochs with train.val_every = 2: epochs 2 and 3 are validated, epoch 1 is
         // not; best.bpk comes from a validated epoch and test.json scores it.
         let dir = tmp("val-every");
-        let cfg = tiny(&dir, &["train.epochs=3", "train.val_every=2", "train.batch=2"]);
+        let cfg = tiny(
+            &dir,
+            &["train.epochs=3", "train.val_every=2", "train.batch=2"],
+        );
         let opts = TrainOptions {
             run_dir: Some(dir.join("run")),
             quiet: true,
@@ -607,12 +610,28 @@ mod tests {
         let jl = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
         assert!(!jl.lines().next().unwrap().contains("\"val\""), "{jl}");
         let csv = std::fs::read_to_string(run.join("results.csv")).unwrap();
-        let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+        let rows: Vec<Vec<&str>> = csv
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').collect())
+            .collect();
         let n_loss = 4;
-        assert!(rows[0][3 + n_loss..].iter().all(|c| *c == "null"), "{:?}", rows[0]);
-        assert!(rows[1][3 + n_loss..].iter().all(|c| *c != "null"), "{:?}", rows[1]);
+        assert!(
+            rows[0][3 + n_loss..].iter().all(|c| *c == "null"),
+            "{:?}",
+            rows[0]
+        );
+        assert!(
+            rows[1][3 + n_loss..].iter().all(|c| *c != "null"),
+            "{:?}",
+            rows[1]
+        );
         let best = Checkpoint::load(&run.join("best.bpk")).unwrap();
-        assert!(matches!(best.header.epoch, 2 | 3), "best from epoch {}", best.header.epoch);
+        assert!(
+            matches!(best.header.epoch, 2 | 3),
+            "best from epoch {}",
+            best.header.epoch
+        );
         assert!(best.header.val.is_some());
         assert_eq!(s.best_epoch, best.header.epoch);
         assert_eq!(run_files::read_test(&run).unwrap().epoch, best.header.epoch);

@@ -201,7 +201,9 @@ mod tests {
         }
         let bx = [9.0, 10.0, 39.0, 30.0];
         let t = mask_targets(&[(&mask, bx)], [h, w], 28);
-        let back = paste_roi_mask(&t, 28, bx, (w as u32, h as u32), 0.5).full().data;
+        let back = paste_roi_mask(&t, 28, bx, (w as u32, h as u32), 0.5)
+            .full()
+            .data;
         let inter = mask
             .iter()
             .zip(&back)
