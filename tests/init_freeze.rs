@@ -158,7 +158,7 @@ fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
         .unwrap_err()
     );
     assert!(
-        e.contains("resnet18_w8.pth") && e.contains("ultralytics import not built in this branch"),
+        e.contains("resnet18_w8.pth") && e.contains("no ultralytics weights fit it"),
         "{e}"
     );
     let g = d.join("garbage.bpk");

@@ -14,7 +14,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use chicktrain::model::maskrcnn::mask_head::MaskHeadConfig;
 use chicktrain::model::maskrcnn::roi_heads::RoiHeadsConfig;
 use chicktrain::model::maskrcnn::torchvision::{class_dependent, map_state_dict, TorchvisionKind};
-use chicktrain::model::maskrcnn::{MaskRcnn, MaskRcnnConfig, STRIDES};
+use chicktrain::model::maskrcnn::{MaskRcnnConfig, STRIDES};
 use chicktrain::model::weights::{self, apply_named, snapshot_data};
 use chicktrain::train::detector::{Detector, DetectorConfig};
 use chicktrain::train::init::load_init;

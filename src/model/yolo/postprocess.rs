@@ -35,14 +35,7 @@ pub fn postprocess(out: &YoloOutput, conf: f32, iou: f32, max_det: usize) -> Vec
             let mut cands = Vec::new();
             let mut anchor_of = Vec::new();
             for a in 0..na {
-                let (mut best, mut cls) = (f32::NEG_INFINITY, 0);
-                for c in 0..nc {
-                    let p = probs[(i * nc + c) * na + a];
-                    if p > best {
-                        best = p;
-                        cls = c;
-                    }
-                }
+                let (best, cls) = best_class(nc, |c| probs[(i * nc + c) * na + a]);
                 if best <= conf {
                     continue;
                 }
@@ -62,29 +55,14 @@ pub fn postprocess(out: &YoloOutput, conf: f32, iou: f32, max_det: usize) -> Vec
                 cands.push((bx, best, cls));
                 anchor_of.push(a);
             }
-            let keep = nms(&cands, iou, max_det);
-            let protos = Arc::new(Prototypes {
-                data: proto[i * nm * ph * pw..(i + 1) * nm * ph * pw].to_vec(),
-                channels: nm,
-                height: ph,
-                width: pw,
-                stride: (ih / ph.max(1)).max(1),
-            });
-            keep.iter()
-                .map(|&k| {
-                    let (bx, score, class) = cands[k];
-                    let a = anchor_of[k];
-                    Detection {
-                        bbox: [bx[0], bx[1], bx[2] - bx[0], bx[3] - bx[1]],
-                        score,
-                        class,
-                        mask: MaskSource::Prototypes {
-                            coef: (0..nm).map(|m| coef[(i * nm + m) * na + a]).collect(),
-                            protos: protos.clone(),
-                        },
-                    }
-                })
-                .collect()
+            let protos = prototypes(
+                &proto[i * nm * ph * pw..(i + 1) * nm * ph * pw],
+                [nm, ph, pw],
+                ih,
+            );
+            kept(&cands, &anchor_of, (iou, max_det), protos, |a, m| {
+                coef[(i * nm + m) * na + a]
+            })
         })
         .collect()
 }
@@ -109,14 +87,7 @@ pub fn postprocess_layout(
             let mut cands = Vec::new();
             let mut anchor_of = Vec::new();
             for a in 0..na {
-                let (mut best, mut cls) = (f32::NEG_INFINITY, 0);
-                for c in 0..nc {
-                    let p = at(i, 4 + c, a);
-                    if p > best {
-                        best = p;
-                        cls = c;
-                    }
-                }
+                let (best, cls) = best_class(nc, |c| at(i, 4 + c, a));
                 if best <= conf {
                     continue;
                 }
@@ -125,28 +96,66 @@ pub fn postprocess_layout(
                 cands.push((bx, best, cls));
                 anchor_of.push(a);
             }
-            let keep = nms(&cands, iou, max_det);
-            let protos = Arc::new(Prototypes {
-                data: proto[i * nm * ph * pw..(i + 1) * nm * ph * pw].to_vec(),
-                channels: nm,
-                height: ph,
-                width: pw,
-                stride: (input[0] / ph.max(1)).max(1),
-            });
-            keep.iter()
-                .map(|&k| {
-                    let (bx, score, class) = cands[k];
-                    Detection {
-                        bbox: [bx[0], bx[1], bx[2] - bx[0], bx[3] - bx[1]],
-                        score,
-                        class,
-                        mask: MaskSource::Prototypes {
-                            coef: (0..nm).map(|m| at(i, 4 + nc + m, anchor_of[k])).collect(),
-                            protos: protos.clone(),
-                        },
-                    }
-                })
-                .collect()
+            let protos = prototypes(
+                &proto[i * nm * ph * pw..(i + 1) * nm * ph * pw],
+                [nm, ph, pw],
+                input[0],
+            );
+            kept(&cands, &anchor_of, (iou, max_det), protos, |a, m| {
+                at(i, 4 + nc + m, a)
+            })
+        })
+        .collect()
+}
+
+/// The best class of an anchor and its score (the first of equal scores).
+fn best_class(nc: usize, score: impl Fn(usize) -> f32) -> (f32, usize) {
+    let (mut best, mut cls) = (f32::NEG_INFINITY, 0);
+    for c in 0..nc {
+        let p = score(c);
+        if p > best {
+            best = p;
+            cls = c;
+        }
+    }
+    (best, cls)
+}
+
+/// One image's `[nm, ph, pw]` prototypes, shared by its detections; `input_h` gives the
+/// stride.
+fn prototypes(data: &[f32], [nm, ph, pw]: [usize; 3], input_h: usize) -> Arc<Prototypes> {
+    Arc::new(Prototypes {
+        data: data.to_vec(),
+        channels: nm,
+        height: ph,
+        width: pw,
+        stride: (input_h / ph.max(1)).max(1),
+    })
+}
+
+/// Class-wise NMS over one image's candidates (xyxy, score, class; `anchor_of` their
+/// anchors) and the kept detections, each with its mask coefficients `coef(anchor, m)`.
+fn kept(
+    cands: &[([f32; 4], f32, usize)],
+    anchor_of: &[usize],
+    (iou, max_det): (f32, usize),
+    protos: Arc<Prototypes>,
+    coef: impl Fn(usize, usize) -> f32,
+) -> Vec<Detection> {
+    let nm = protos.channels;
+    nms(cands, iou, max_det)
+        .into_iter()
+        .map(|k| {
+            let (bx, score, class) = cands[k];
+            Detection {
+                bbox: [bx[0], bx[1], bx[2] - bx[0], bx[3] - bx[1]],
+                score,
+                class,
+                mask: MaskSource::Prototypes {
+                    coef: (0..nm).map(|m| coef(anchor_of[k], m)).collect(),
+                    protos: protos.clone(),
+                },
+            }
         })
         .collect()
 }
