@@ -432,3 +432,53 @@ fn export_command_writes_the_ultralytics_state_dict() {
     assert!(!dir.join("x.safetensors").exists());
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// `model.init` with an ultralytics `.pt` (the trainer-format fixture, 2 classes), through
+/// the dispatch the trainer uses: into a 2-class model every tensor loads, equal to the
+/// strict path; into a 1-class model the class branch starts fresh and is named; into a
+/// model without C2PSA (another layer numbering) a clear error naming the file.
+#[test]
+fn model_init_takes_an_ultralytics_checkpoint() {
+    use chicktrain::model::weights::{collect, snapshot_data};
+    use chicktrain::train::detector::{Detector, DetectorConfig};
+    use chicktrain::train::init::load_init;
+    let dev = Device::flex();
+    let file = fixture("tiny_seg.pt");
+    let c2 = tiny_cfg(2);
+    let cfg = DetectorConfig::Yolo(c2.clone());
+    let (det, note) = load_init(cfg.init(&dev), &cfg, &file, &dev).unwrap();
+    assert!(
+        note.contains("ultralytics") && !note.contains("fresh initialisation"),
+        "{note}"
+    );
+    let Detector::Yolo(m) = det else {
+        panic!("not a YOLO")
+    };
+    let strict = apply_all(c2.init(&dev), &read_ultralytics(&file, &c2).unwrap()).unwrap();
+    let (a, b) = (collect(&m), collect(&strict));
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.into_iter().zip(b) {
+        assert_eq!(x.name, y.name);
+        let name = x.name.clone();
+        let (x, y) = (snapshot_data(x).unwrap(), snapshot_data(y).unwrap());
+        assert_eq!(
+            x.try_to_vec::<f32>().unwrap(),
+            y.try_to_vec::<f32>().unwrap(),
+            "{name}"
+        );
+    }
+
+    let c1 = DetectorConfig::Yolo(tiny_cfg(1));
+    let (_, note) = load_init(c1.init(&dev), &c1, &file, &dev).unwrap();
+    assert!(
+        note.contains("keep their fresh initialisation") && note.contains("head.cls"),
+        "{note}"
+    );
+
+    let c3 = DetectorConfig::Yolo(tiny_cfg(2).with_c2psa(false));
+    let e = format!(
+        "{:#}",
+        load_init(c3.init(&dev), &c3, &file, &dev).unwrap_err()
+    );
+    assert!(e.contains("tiny_seg.pt") && e.contains("C2PSA"), "{e}");
+}
