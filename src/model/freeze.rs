@@ -87,34 +87,54 @@ pub fn is_frozen(path: &str, prefixes: &[String]) -> bool {
     })
 }
 
+/// The module path of a visitor or mapper as the stage prefixes read it: enum variants
+/// (`Detector::Yolo`, `C3k2Inner::C3k`) are not path segments, so the prefixes read the
+/// same on a `Detector` and on the model inside it. Feed it `enter_module` /
+/// `exit_module`.
+#[derive(Debug, Default)]
+pub struct StagePath(Vec<String>);
+
+impl StagePath {
+    pub fn enter(&mut self, name: &str, container: &str) {
+        if !container.starts_with("Enum:") {
+            self.0.push(name.to_string());
+        }
+    }
+
+    pub fn exit(&mut self, container: &str) {
+        if !container.starts_with("Enum:") {
+            self.0.pop();
+        }
+    }
+
+    /// Whether the current tensor lies in one of the frozen `prefixes`.
+    pub fn frozen(&self, prefixes: &[String]) -> bool {
+        is_frozen(&self.0.join("."), prefixes)
+    }
+}
+
 /// Freezes every module under `prefixes`: no gradients, BatchNorm in eval mode.
 pub fn freeze<M: Module>(module: M, prefixes: &[String]) -> M {
     struct F<'a> {
-        path: Vec<String>,
+        path: StagePath,
         prefixes: &'a [String],
     }
     impl ModuleMapper for F<'_> {
-        // Enum variants (`Detector::Yolo`) are not path segments, so the stage prefixes
-        // read the same on a `Detector` and on the model inside it.
         fn enter_module(&mut self, name: &str, container: &str) {
-            if !container.starts_with("Enum:") {
-                self.path.push(name.to_string());
-            }
+            self.path.enter(name, container);
         }
         fn exit_module(&mut self, _: &str, container: &str) {
-            if !container.starts_with("Enum:") {
-                self.path.pop();
-            }
+            self.path.exit(container);
         }
         fn map_float<const D: usize>(&mut self, p: Param<Tensor<D>>) -> Param<Tensor<D>> {
-            if is_frozen(&self.path.join("."), self.prefixes) {
+            if self.path.frozen(self.prefixes) {
                 p.set_require_grad(false)
             } else {
                 p
             }
         }
         fn map_flag(&mut self, f: Param<Flag>) -> Param<Flag> {
-            if is_frozen(&self.path.join("."), self.prefixes) {
+            if self.path.frozen(self.prefixes) {
                 f.with_value(false)
             } else {
                 f
@@ -125,7 +145,7 @@ pub fn freeze<M: Module>(module: M, prefixes: &[String]) -> M {
         return module;
     }
     module.map(&mut F {
-        path: Vec::new(),
+        path: StagePath::default(),
         prefixes,
     })
 }

@@ -40,29 +40,23 @@ impl ModuleVisitor for Collect {
 struct Blend<'a> {
     src: VecDeque<Tensor<1>>,
     d: f64,
-    path: Vec<String>,
+    path: crate::model::freeze::StagePath,
     frozen: &'a [String],
 }
 
 impl ModuleMapper for Blend<'_> {
-    // Enum variants (`Detector::Yolo`, `C3k2Inner::C3k`) are not path segments here, so
-    // stage prefixes read the same on a `Detector` and on the model inside it.
     fn enter_module(&mut self, name: &str, container: &str) {
-        if !container.starts_with("Enum:") {
-            self.path.push(name.to_string());
-        }
+        self.path.enter(name, container);
     }
     fn exit_module(&mut self, _: &str, container: &str) {
-        if !container.starts_with("Enum:") {
-            self.path.pop();
-        }
+        self.path.exit(container);
     }
     fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
         let s = self
             .src
             .pop_front()
             .expect("Ema: the model has fewer tensors than its EMA copy");
-        if crate::model::freeze::is_frozen(&self.path.join("."), self.frozen) {
+        if self.path.frozen(self.frozen) {
             return param;
         }
         let d = self.d;
@@ -109,7 +103,7 @@ impl<M: Module> Ema<M> {
         self.model = m.map(&mut Blend {
             src: c.0,
             d,
-            path: Vec::new(),
+            path: Default::default(),
             frozen: &self.frozen,
         });
     }
