@@ -1,5 +1,5 @@
 //! `model.init = "PATH"`: start training from weights in a file. The format is read from
-//! the first bytes ([`weights::sniff`]), never the extension, and every source goes
+//! the first bytes ([`weights::sniff_file`]), never the extension, and every source goes
 //! through the same loader ([`weights::apply`]) with the same checks:
 //!
 //! | file | model | what is loaded |
@@ -33,23 +33,21 @@ pub fn load_init(
     device: &Device,
 ) -> Result<(Detector, String)> {
     let origin = format!("model.init {}", path.display());
-    let bytes = std::fs::read(path).with_context(|| format!("{origin}: cannot read the file"))?;
-    let Some(format) = weights::sniff(&bytes) else {
+    let (format, head) =
+        weights::sniff_file(path).with_context(|| format!("{origin}: cannot read the file"))?;
+    let Some(format) = format else {
         bail!(
             "{origin}: not a chicktrain checkpoint, PyTorch file or safetensors file (first bytes {:02x?})",
-            &bytes[..bytes.len().min(8)]
+            &head[..head.len().min(8)]
         );
     };
     // Why tensors may keep their initialisation, for the message.
     let mut fresh_why = "the file's class count differs there";
     let (model, applied, what) = match (format, model) {
         (Format::Chicktrain, model) => {
-            let ck = Checkpoint::from_bytes(&bytes, path).with_context(|| origin.clone())?;
+            let ck = Checkpoint::load(path).with_context(|| origin.clone())?;
             let src = &ck.header.model;
-            let want = match &model {
-                Detector::Yolo(_) => crate::config::ModelKind::Yolo,
-                Detector::MaskRcnn(_) => crate::config::ModelKind::Maskrcnn,
-            };
+            let want = config.kind();
             if src.kind() != want {
                 let name = |k| match k {
                     crate::config::ModelKind::Yolo => "model.kind = \"yolo\"",

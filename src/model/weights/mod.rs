@@ -51,6 +51,26 @@ pub const CHICKTRAIN_MAGIC: &[u8] = b"CHICKTRAIN-CKPT1\n";
 
 /// The format of `bytes`, or `None` if it is none of the four.
 pub fn sniff(bytes: &[u8]) -> Option<Format> {
+    sniff_head(bytes, bytes.len() as u64)
+}
+
+/// Bytes [`sniff_file`] reads: the longest magic, the checkpoint's line.
+const HEAD: usize = 17;
+
+/// The format of the file at `path` from its first bytes and its length, without
+/// reading the rest (a torchvision `.pth` is 100–200 MB, and its reader opens it anyway);
+/// also the first bytes, for messages.
+pub fn sniff_file(path: &Path) -> std::io::Result<(Option<Format>, Vec<u8>)> {
+    use std::io::Read;
+    let f = std::fs::File::open(path)?;
+    let len = f.metadata()?.len();
+    let mut head = Vec::with_capacity(HEAD);
+    f.take(HEAD as u64).read_to_end(&mut head)?;
+    Ok((sniff_head(&head, len), head))
+}
+
+/// [`sniff`] of a file whose first bytes are `bytes` and whose length is `len`.
+fn sniff_head(bytes: &[u8], len: u64) -> Option<Format> {
     if bytes.starts_with(CHICKTRAIN_MAGIC) {
         return Some(Format::Chicktrain);
     }
@@ -63,7 +83,7 @@ pub fn sniff(bytes: &[u8]) -> Option<Format> {
     }
     if bytes.len() >= 9 {
         let n = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes"));
-        if n >= 2 && n <= (bytes.len() - 8) as u64 && bytes[8] == b'{' {
+        if n >= 2 && n <= len - 8 && bytes[8] == b'{' {
             return Some(Format::Safetensors);
         }
     }
