@@ -198,6 +198,24 @@ impl GraphBuilder {
         self.node(scope, op, inputs, 1, attrs).remove(0)
     }
 
+    /// The inputs of a convolution node: `x`, the weight initializer and, if given, the
+    /// bias initializer of `bias_len` values (`scope.weight`, `scope.bias`).
+    fn weighted_inputs(
+        &mut self,
+        scope: &str,
+        x: &str,
+        (wd, wv): (&[usize; 4], &[f32]),
+        bias: Option<&[f32]>,
+        bias_len: usize,
+    ) -> Vec<String> {
+        let w = self.constant_f32(&format!("{scope}.weight"), wd, wv);
+        let mut inputs = vec![x.to_string(), w];
+        if let Some(b) = bias {
+            inputs.push(self.constant_f32(&format!("{scope}.bias"), &[bias_len], b));
+        }
+        inputs
+    }
+
     /// `Conv` with symmetric padding `pad`, `stride`, `groups`; `weight` is
     /// `[c_out, c_in / groups, kh, kw]` (the layout of both Burn and ONNX).
     #[allow(clippy::too_many_arguments)]
@@ -211,12 +229,8 @@ impl GraphBuilder {
         pad: [usize; 2],
         groups: usize,
     ) -> String {
-        let (wd, wv) = weight;
-        let w = self.constant_f32(&format!("{scope}.weight"), wd, wv);
-        let mut inputs = vec![x.to_string(), w];
-        if let Some(b) = bias {
-            inputs.push(self.constant_f32(&format!("{scope}.bias"), &[wd[0]], b));
-        }
+        let wd = weight.0;
+        let inputs = self.weighted_inputs(scope, x, weight, bias, wd[0]);
         let refs: Vec<&str> = inputs.iter().map(String::as_str).collect();
         self.one(
             scope,
@@ -244,12 +258,8 @@ impl GraphBuilder {
         bias: Option<&[f32]>,
         stride: [usize; 2],
     ) -> String {
-        let (wd, wv) = weight;
-        let w = self.constant_f32(&format!("{scope}.weight"), wd, wv);
-        let mut inputs = vec![x.to_string(), w];
-        if let Some(b) = bias {
-            inputs.push(self.constant_f32(&format!("{scope}.bias"), &[wd[1]], b));
-        }
+        let wd = weight.0;
+        let inputs = self.weighted_inputs(scope, x, weight, bias, wd[1]);
         let refs: Vec<&str> = inputs.iter().map(String::as_str).collect();
         self.one(
             scope,
