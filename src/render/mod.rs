@@ -122,6 +122,28 @@ pub fn image_rng(opts: &RenderOptions, seed: u64, index: u64) -> ChaCha8Rng {
     ChaCha8Rng::from_seed(key)
 }
 
+/// An independent RNG stream of one image for one randomisation group (carcass variety,
+/// scene, distractors, lighting, camera, physics, …), keyed by (preset seed space,
+/// dataset seed, image index, group). Groups draw from their own streams rather than the
+/// image's main stream, so switching one group off (or adding draws to it) leaves every
+/// other group's choices, and the main stream, exactly as they were.
+pub fn group_rng(opts: &RenderOptions, seed: u64, index: u64, group: &str) -> ChaCha8Rng {
+    let g = group.bytes().fold(0xCBF2_9CE4_8422_2325u64, |h, b| {
+        (h ^ b as u64).wrapping_mul(0x100_0000_01B3)
+    });
+    let mut key = [0u8; 32];
+    let words = [
+        mix64(opts.domain() ^ g),
+        mix64(seed ^ 0x6A09_E667 ^ g.rotate_left(7)),
+        mix64(index.wrapping_add(0xB5EE) ^ g.rotate_left(29)),
+        mix64(g ^ seed.rotate_left(13) ^ index.rotate_left(37)),
+    ];
+    for (i, w) in words.iter().enumerate() {
+        key[i * 8..i * 8 + 8].copy_from_slice(&w.to_le_bytes());
+    }
+    ChaCha8Rng::from_seed(key)
+}
+
 /// Renders sample `index` of dataset seed `seed`. Deterministic: same options, seed and
 /// index give the same pixels, ids and labels on any machine thread count.
 pub fn render_sample(
@@ -133,7 +155,8 @@ pub fn render_sample(
     let asset = scene::asset(opts.carcass.as_ref())?;
     let t0 = Instant::now();
     let mut rng = image_rng(opts, seed, index);
-    let sc = scene::sample(&mut rng, opts, &asset);
+    let streams = scene::Streams { seed, index };
+    let sc = scene::sample(&mut rng, &streams, opts, &asset);
     let t_scene = t0.elapsed();
     let tracer = trace::Tracer::build(&sc.geometry);
     let t1 = Instant::now();

@@ -98,10 +98,32 @@ fn uni<R: Rng>(rng: &mut R, r: [f32; 2]) -> f32 {
     }
 }
 
+/// Where an image's per-group RNG streams come from ([`super::group_rng`]): what a
+/// randomisation group draws goes to its own stream, not the main `rng`.
+#[derive(Clone, Copy, Debug)]
+pub struct Streams {
+    pub seed: u64,
+    pub index: u64,
+}
+
+impl Streams {
+    /// The stream of `group` (e.g. "carcass", "scene", "distractors", "lighting",
+    /// "camera", "physics") for this image.
+    pub fn rng(&self, opts: &RenderOptions, group: &str) -> rand_chacha::ChaCha8Rng {
+        super::group_rng(opts, self.seed, self.index, group)
+    }
+}
+
 /// Samples a scene. `rng` is the image's own stream; the helpers below draw from it in
 /// this order: count and density, camera, pile layout, each carcass's plan, light and
 /// room, plate, sensor, JPEG quality, render seed. Changing that order changes every image.
-pub fn sample<R: Rng>(rng: &mut R, opts: &RenderOptions, asset: &Asset) -> Scene {
+pub fn sample<R: Rng>(
+    rng: &mut R,
+    streams: &Streams,
+    opts: &RenderOptions,
+    asset: &Asset,
+) -> Scene {
+    let _ = streams;
     let n = rng.random_range(opts.carcasses[0]..=opts.carcasses[1].max(opts.carcasses[0])) as usize;
     let density = uni(rng, opts.density);
     let view = View::sample(rng, opts);
