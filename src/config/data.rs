@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::render::randomize::Randomize;
+
 /// Where the "real" images come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -68,6 +70,16 @@ pub struct DataConfig {
     /// stored once under `<cache>/<key>/` and read back by later runs and `eval`.
     #[serde(default = "default_cache")]
     pub cache: PathBuf,
+    /// Domain-randomisation groups of the synthetic renders (`[data.randomize]`, e.g.
+    /// `lighting = false`); the proxy-real set is never randomised. See
+    /// `render::randomize`.
+    #[serde(default = "default_randomize")]
+    pub randomize: Randomize,
+}
+
+/// Every group on: a config renders the full randomised domain unless it turns groups off.
+fn default_randomize() -> Randomize {
+    Randomize::ALL
 }
 
 fn default_cache() -> PathBuf {

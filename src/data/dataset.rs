@@ -333,7 +333,10 @@ impl SyntheticSet {
         SyntheticSet {
             count: data.synthetic,
             fresh: data.fresh_synthetic,
-            opts: render_options(false, data.image_size),
+            opts: RenderOptions {
+                randomize: data.randomize,
+                ..render_options(false, data.image_size)
+            },
             seed,
             cache_root: Some(data.cache.clone()),
         }

@@ -26,6 +26,7 @@ pub mod mesh;
 pub mod noise;
 pub mod pile;
 pub mod preset;
+pub mod randomize;
 pub mod scene;
 pub mod screen;
 pub mod sensor;

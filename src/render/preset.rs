@@ -18,6 +18,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use super::labels::LabelThresholds;
+use super::randomize::Randomize;
 use super::skin::PoseRanges;
 
 /// Image file format of rendered datasets.
@@ -86,6 +87,10 @@ pub struct RenderOptions {
     /// up to ties at triangle edges, several times faster).
     pub raster_primary: bool,
     pub labels: LabelThresholds,
+    /// Domain-randomisation groups switched on (see [`Randomize`]); all off renders the
+    /// base look, and is left out of the serialised options (and so of cache keys).
+    #[serde(default, skip_serializing_if = "Randomize::is_off")]
+    pub randomize: Randomize,
 }
 
 impl RenderOptions {
@@ -128,6 +133,7 @@ impl RenderOptions {
             reflections: true,
             raster_primary: true,
             labels: LabelThresholds::default(),
+            randomize: Randomize::default(),
         }
     }
 

@@ -1,0 +1,96 @@
+//! Domain-randomisation groups: which families of render choices are widened beyond the
+//! preset's base look. Each group draws from its own RNG stream
+//! ([`super::group_rng`], `Streams::rng(opts, name)` with the group's name), so turning
+//! one off leaves every other choice of the image unchanged — which is what the
+//! per-group ablation (`train` with one group off in turn, scored cross-domain) needs.
+//! All off is the renderer as it was before the groups existed (same pixels, same cache
+//! key). The ranges each group draws from are documented in one table in README.md.
+
+use serde::{Deserialize, Serialize};
+
+/// On/off per randomisation group (`[data.randomize]` in a config).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Randomize {
+    /// Body families, sizes, proportions, missing / cut parts, skin tone, fat, bruises,
+    /// feather remnants, torn skin (stream "carcass").
+    pub carcass: bool,
+    /// Surfaces under the pile: steel plates, belts and crates of several colours, wet and
+    /// dry, smears; empty scenes and piles cut by the frame (stream "scene").
+    pub scene: bool,
+    /// Non-carcass objects: gloves, hands, shackles, tools, water (stream "distractors").
+    pub distractors: bool,
+    /// Number, kind, colour temperature and hardness of lights, glare, exposure, white
+    /// balance (stream "lighting").
+    pub lighting: bool,
+    /// Camera height, tilt, field of view, lens distortion, motion blur, sensor noise,
+    /// JPEG quality (stream "camera").
+    pub camera: bool,
+    /// Piles dropped and settled by rigid-body physics (rapier3d) instead of the
+    /// height-field drop (stream "physics").
+    pub physics: bool,
+}
+
+impl Randomize {
+    /// Every group on.
+    pub const ALL: Randomize = Randomize {
+        carcass: true,
+        scene: true,
+        distractors: true,
+        lighting: true,
+        camera: true,
+        physics: true,
+    };
+
+    /// The group names, in table order (the ablation turns them off one at a time).
+    pub const GROUPS: [&'static str; 6] = [
+        "carcass",
+        "scene",
+        "distractors",
+        "lighting",
+        "camera",
+        "physics",
+    ];
+
+    /// True when no group is on (the renderer's base look; omitted from cache keys).
+    pub fn is_off(&self) -> bool {
+        *self == Randomize::default()
+    }
+
+    /// A copy with group `name` set to `on`; an unknown name is an error listing the groups.
+    pub fn with(mut self, name: &str, on: bool) -> anyhow::Result<Randomize> {
+        let slot = match name {
+            "carcass" => &mut self.carcass,
+            "scene" => &mut self.scene,
+            "distractors" => &mut self.distractors,
+            "lighting" => &mut self.lighting,
+            "camera" => &mut self.camera,
+            "physics" => &mut self.physics,
+            other => anyhow::bail!(
+                "unknown randomisation group {other:?}; expected one of {}",
+                Randomize::GROUPS.join(", ")
+            ),
+        };
+        *slot = on;
+        Ok(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn groups_toggle_by_name_and_unknown_names_are_refused() {
+        let mut r = Randomize::default();
+        assert!(r.is_off());
+        for g in Randomize::GROUPS {
+            r = r.with(g, true).unwrap();
+        }
+        assert_eq!(r, Randomize::ALL);
+        let off = Randomize::ALL.with("lighting", false).unwrap();
+        assert!(!off.lighting && off.camera && !off.is_off());
+        let e = r.with("colour", true).unwrap_err().to_string();
+        assert!(e.contains("colour") && e.contains("physics"), "{e}");
+    }
+}
