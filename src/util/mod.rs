@@ -5,6 +5,7 @@
 //! [`pytorch`], [`safetensors`]).
 
 pub mod hash;
+pub mod hungarian;
 pub mod png;
 pub mod progress;
 pub mod pytorch;
