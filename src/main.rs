@@ -247,7 +247,8 @@ enum BenchWhat {
     /// images/s, peak memory (a fresh process per row), and test AP of --checkpoints.
     Models {
         /// Comma-separated variants: yolo-n, yolo-s, suffixes -p45 -nopsa -w<f> -m<k>;
-        /// mrcnn-r18/r34/r50/r101, suffix -paper for the detectron2-sized preset
+        /// mrcnn-r18/r34/r50/r101, suffix -paper for the detectron2-sized preset;
+        /// m2f-r18/r34/r50/r101 (Mask2Former), suffix -paper for the paper's sizes
         /// (default: all scene options and compact depths).
         #[arg(long)]
         variants: Option<String>,

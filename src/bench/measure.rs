@@ -166,6 +166,7 @@ pub fn measure(variant: &Variant, size: usize, e: Effort, device: &Device) -> Re
     let t = match variant {
         Variant::Yolo { .. } => time_yolo(variant, size, e, &ad, inputs)?,
         Variant::MaskRcnn { .. } => time_maskrcnn(variant, size, e, &ad, inputs)?,
+        Variant::Mask2Former { .. } => time_mask2former(variant, size, e, &ad, inputs)?,
     };
     Ok(Measurement {
         variant: variant.to_string(),
@@ -270,6 +271,52 @@ fn time_maskrcnn(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) ->
         let grads = GradientsParams::from_grads(losses.total.backward(), &model);
         model = optim.step(0.01, model, grads);
         let _ = to_host(model.box_head.cls_score.weight.val().sum());
+        if r >= 1 {
+            steps.push(ms(t));
+        }
+    }
+    Ok(Timed {
+        summary,
+        infer_peak,
+        lat,
+        steps,
+    })
+}
+
+/// A Mask2Former variant: batch-1 `forward_infer` (network and top-k postprocess), then
+/// training steps with the set criterion of all decoder layers.
+fn time_mask2former(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Result<Timed> {
+    let Inputs {
+        x1,
+        xb,
+        targets,
+        mut optim,
+    } = i;
+    let cfg = v.mask2former_config(size).expect("a Mask2Former variant");
+    let mut model = cfg.init(ad);
+    let summary = model.summary(size);
+    let eval = model.valid();
+    let mut lat = Vec::new();
+    for r in 0..e.warmup + e.repeats {
+        let t = Instant::now();
+        let dets = eval.forward_infer(x1.clone());
+        if dets.len() != 1 {
+            bail!("Mask2Former returned {} results for 1 image", dets.len());
+        }
+        if r >= e.warmup {
+            lat.push(ms(t));
+        }
+    }
+    drop(eval);
+    let infer_peak = peak_rss_mib();
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let mut steps = Vec::new();
+    for r in 0..1 + e.train_steps {
+        let t = Instant::now();
+        let losses = model.forward_train(xb.clone(), &targets.images, &mut rng);
+        let grads = GradientsParams::from_grads(losses.total.backward(), &model);
+        model = optim.step(0.01, model, grads);
+        let _ = to_host(model.transformer_decoder.class_embed.weight.val().sum());
         if r >= 1 {
             steps.push(ms(t));
         }

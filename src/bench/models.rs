@@ -31,7 +31,8 @@ pub struct BenchOptions {
     pub exe: PathBuf,
 }
 
-/// The default selection: every YOLO scene option and every Mask R-CNN depth × 5 sizes.
+/// The default selection: every YOLO scene option, every Mask R-CNN depth and the
+/// compact Mask2Former at R18 and R50, × 5 sizes.
 pub fn default_variants() -> Vec<Variant> {
     [
         "yolo-n",
@@ -44,6 +45,8 @@ pub fn default_variants() -> Vec<Variant> {
         "mrcnn-r34",
         "mrcnn-r50",
         "mrcnn-r101",
+        "m2f-r18",
+        "m2f-r50",
     ]
     .iter()
     .map(|s| s.parse().expect("valid default variant"))
@@ -167,7 +170,7 @@ mod tests {
 
     #[test]
     fn default_and_quick_variants_parse() {
-        assert_eq!(default_variants().len(), 10);
+        assert_eq!(default_variants().len(), 12);
         let mut o = BenchOptions {
             variants: vec![],
             sizes: vec![],

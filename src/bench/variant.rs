@@ -7,6 +7,7 @@ use std::str::FromStr;
 
 use anyhow::{bail, Context, Result};
 
+use crate::model::mask2former::Mask2FormerConfig;
 use crate::model::maskrcnn::MaskRcnnConfig;
 use crate::model::yolo::{HeadLevels, Scale, YoloSegConfig};
 use crate::train::detector::DetectorConfig;
@@ -15,7 +16,8 @@ use crate::train::detector::DetectorConfig;
 /// only), `-nopsa` (no C2PSA attention), `-w<f>` (width multiplier), `-m<k>` (mask
 /// prototypes); or `mrcnn-r<depth>` (the compact Mask R-CNN, [`MaskRcnnConfig::new`],
 /// ResNet 18/34/50/101), `mrcnn-r<depth>-paper` (the detectron2-sized preset,
-/// [`MaskRcnnConfig::paper`]).
+/// [`MaskRcnnConfig::paper`]); or `m2f-r<depth>` (the compact Mask2Former,
+/// [`Mask2FormerConfig::new`]), `m2f-r<depth>-paper` ([`Mask2FormerConfig::paper`]).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Variant {
     Yolo {
@@ -30,9 +32,13 @@ pub enum Variant {
         /// The paper preset instead of the compact one.
         paper: bool,
     },
+    Mask2Former {
+        depth: usize,
+        paper: bool,
+    },
 }
 
-const HELP: &str = "expected yolo-n / yolo-s with optional -p45 -nopsa -w<f> -m<k> (e.g. yolo-n-p45-w0.5), or mrcnn-r18 / r34 / r50 / r101 with optional -paper";
+const HELP: &str = "expected yolo-n / yolo-s with optional -p45 -nopsa -w<f> -m<k> (e.g. yolo-n-p45-w0.5), or mrcnn-r18 / r34 / r50 / r101 with optional -paper, or m2f-r18 / r34 / r50 / r101 with optional -paper";
 
 impl FromStr for Variant {
     type Err = anyhow::Error;
@@ -40,7 +46,7 @@ impl FromStr for Variant {
         let mut parts = s.split('-');
         match (parts.next(), parts.next()) {
             (Some("yolo"), Some(sc)) => parse_yolo(s, sc, parts),
-            (Some("mrcnn"), Some(r)) => {
+            (Some(fam @ ("mrcnn" | "m2f")), Some(r)) => {
                 let paper = match (parts.next(), parts.next()) {
                     (None, _) => false,
                     (Some("paper"), None) => true,
@@ -51,7 +57,11 @@ impl FromStr for Variant {
                     .and_then(|d| d.parse().ok())
                     .filter(|d| [18, 34, 50, 101].contains(d))
                     .with_context(|| format!("variant {s:?}: unknown depth; {HELP}"))?;
-                Ok(Variant::MaskRcnn { depth, paper })
+                Ok(if fam == "mrcnn" {
+                    Variant::MaskRcnn { depth, paper }
+                } else {
+                    Variant::Mask2Former { depth, paper }
+                })
             }
             _ => bail!("unknown model variant {s:?}; {HELP}"),
         }
@@ -118,8 +128,13 @@ impl std::fmt::Display for Variant {
                 }
                 Ok(())
             }
-            Variant::MaskRcnn { depth, paper } => {
-                write!(f, "mrcnn-r{depth}")?;
+            Variant::MaskRcnn { depth, paper } | Variant::Mask2Former { depth, paper } => {
+                let fam = if matches!(self, Variant::MaskRcnn { .. }) {
+                    "mrcnn"
+                } else {
+                    "m2f"
+                };
+                write!(f, "{fam}-r{depth}")?;
                 if *paper {
                     write!(f, "-paper")?;
                 }
@@ -148,6 +163,11 @@ impl Variant {
                 depth: c.depth,
                 paper: c.fpn_channels == MaskRcnnConfig::paper(c.depth, c.num_classes).fpn_channels,
             },
+            // As for Mask R-CNN: the decoder width tells the presets apart.
+            DetectorConfig::Mask2former(c) => Variant::Mask2Former {
+                depth: c.depth,
+                paper: c.hidden_dim == Mask2FormerConfig::paper(c.depth, 1).hidden_dim,
+            },
         }
     }
 
@@ -168,7 +188,7 @@ impl Variant {
                     .with_width_mult(width)
                     .with_num_masks(protos),
             ),
-            Variant::MaskRcnn { .. } => None,
+            Variant::MaskRcnn { .. } | Variant::Mask2Former { .. } => None,
         }
     }
 
@@ -183,7 +203,23 @@ impl Variant {
                 };
                 Some(c.with_input_size(size))
             }
-            Variant::Yolo { .. } => None,
+            Variant::Yolo { .. } | Variant::Mask2Former { .. } => None,
+        }
+    }
+
+    /// The one-class Mask2Former this variant names at `size` px (None otherwise).
+    pub(super) fn mask2former_config(&self, size: usize) -> Option<Mask2FormerConfig> {
+        match *self {
+            Variant::Mask2Former { depth, paper } => {
+                let mut c = if paper {
+                    Mask2FormerConfig::paper(depth, 1)
+                } else {
+                    Mask2FormerConfig::new(depth, 1)
+                };
+                c.input_size = size;
+                Some(c)
+            }
+            _ => None,
         }
     }
 }
@@ -199,6 +235,8 @@ mod tests {
             "yolo-s-p45",
             "yolo-n-nopsa-w0.5-m16",
             "mrcnn-r101",
+            "m2f-r50",
+            "m2f-r18-paper",
         ] {
             assert_eq!(s.parse::<Variant>().unwrap().to_string(), s);
         }
@@ -211,11 +249,28 @@ mod tests {
             "yolo-n-w0",
             "yolo-n-m0",
             "mrcnn-r19",
+            "m2f-r42",
+            "m2f-r50-big",
             "rcnn",
         ] {
             let e = bad.parse::<Variant>().unwrap_err().to_string();
             assert!(e.contains(bad), "{e}");
         }
+    }
+
+    #[test]
+    fn mask2former_variants_build_their_presets() {
+        let v: Variant = "m2f-r50-paper".parse().unwrap();
+        let mut want = Mask2FormerConfig::paper(50, 1);
+        want.input_size = 640;
+        assert_eq!(v.mask2former_config(640), Some(want.clone()));
+        assert_eq!(v.maskrcnn_config(640), None);
+        assert_eq!(Variant::of_detector(&DetectorConfig::Mask2former(want)), v);
+        let c = Mask2FormerConfig::new(18, 1);
+        assert_eq!(
+            Variant::of_detector(&DetectorConfig::Mask2former(c)).to_string(),
+            "m2f-r18"
+        );
     }
 
     #[test]

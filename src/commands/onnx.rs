@@ -58,6 +58,10 @@ pub fn export_onnx(r: &OnnxExport) -> Result<String> {
              the backbone + FPN + RPN + heads graph with RoIAlign is what is left)",
             r.checkpoint.display()
         ),
+        Detector::Mask2Former(_) => bail!(
+            "{}: ONNX export of Mask2Former is not implemented (only YOLO-seg exports)",
+            r.checkpoint.display()
+        ),
     };
     let size = ck.header.model.input_size();
     let opts = OnnxExportOptions {

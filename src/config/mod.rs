@@ -17,7 +17,8 @@ mod train;
 
 pub use data::{DataConfig, RealConfig, RealKind};
 pub use model::{
-    MaskRcnnModelConfig, MaskRcnnPreset, ModelConfig, ModelKind, YoloModelConfig, YoloScale,
+    Mask2FormerModelConfig, Mask2FormerPreset, MaskRcnnModelConfig, MaskRcnnPreset, ModelConfig,
+    ModelKind, YoloModelConfig, YoloScale,
 };
 pub use shipped::SHIPPED;
 pub use train::{OptimizerKind, ScheduleKind, TrainConfig};
@@ -197,6 +198,11 @@ impl Config {
             ModelKind::Yolo => ("yolo", 23, "ultralytics layer indices; 23 is the head"),
             ModelKind::Maskrcnn => (
                 "maskrcnn",
+                5,
+                "1 = stem, 2–5 = stem and the first 1–4 ResNet stages",
+            ),
+            ModelKind::Mask2former => (
+                "mask2former",
                 5,
                 "1 = stem, 2–5 = stem and the first 1–4 ResNet stages",
             ),

@@ -73,4 +73,28 @@ pub const SHIPPED: &[(&str, &str)] = &[
         "maskrcnn_r101_syn1000.toml",
         include_str!("../../configs/maskrcnn_r101_syn1000.toml"),
     ),
+    (
+        "cpu_protocol_mask2former.toml",
+        include_str!("../../configs/cpu_protocol_mask2former.toml"),
+    ),
+    (
+        "mask2former_real_baseline.toml",
+        include_str!("../../configs/mask2former_real_baseline.toml"),
+    ),
+    (
+        "mask2former_syn250.toml",
+        include_str!("../../configs/mask2former_syn250.toml"),
+    ),
+    (
+        "mask2former_syn500.toml",
+        include_str!("../../configs/mask2former_syn500.toml"),
+    ),
+    (
+        "mask2former_syn750.toml",
+        include_str!("../../configs/mask2former_syn750.toml"),
+    ),
+    (
+        "mask2former_syn1000.toml",
+        include_str!("../../configs/mask2former_syn1000.toml"),
+    ),
 ];

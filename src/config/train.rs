@@ -56,6 +56,10 @@ pub struct TrainConfig {
     /// Global gradient-norm clip (ultralytics uses 10).
     #[serde(default = "default_clip")]
     pub grad_clip: f64,
+    /// Learning-rate factor of the parameters under `backbone.` (weights and biases;
+    /// Mask2Former's recipe: 0.1). 1 = one rate for the whole model.
+    #[serde(default = "default_backbone_lr_mult")]
+    pub backbone_lr_mult: f64,
     #[serde(default = "default_true")]
     pub ema: bool,
     #[serde(default = "default_fliplr")]
@@ -106,6 +110,9 @@ fn default_schedule() -> ScheduleKind {
 }
 fn default_milestones() -> Vec<usize> {
     vec![30, 60, 100]
+}
+fn default_backbone_lr_mult() -> f64 {
+    1.0
 }
 fn default_clip() -> f64 {
     10.0
@@ -159,6 +166,15 @@ impl TrainConfig {
             bail!(
                 "train.warmup_bias_lr = {} must be in [0, 1]",
                 t.warmup_bias_lr
+            );
+        }
+        if !(t.backbone_lr_mult.is_finite()
+            && t.backbone_lr_mult > 0.0
+            && t.backbone_lr_mult <= 10.0)
+        {
+            bail!(
+                "train.backbone_lr_mult = {} must be in (0, 10]",
+                t.backbone_lr_mult
             );
         }
         if !(t.grad_clip.is_finite() && t.grad_clip > 0.0) {

@@ -20,6 +20,7 @@ pub mod freeze;
 pub mod instance_mask;
 pub mod layers;
 pub mod loss;
+pub mod mask2former;
 pub mod maskrcnn;
 pub mod onnx;
 pub mod summary;

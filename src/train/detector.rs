@@ -2,7 +2,7 @@
 //! tagged unions): build from the run config, loss of a batch with named terms, inference
 //! to [`Detection`]s for the shared COCO evaluation, summary. Everything else the trainer
 //! does (optimiser, EMA, clipping, checkpoints) works on any Burn [`Module`], so it serves
-//! both variants unchanged.
+//! every variant unchanged.
 
 use anyhow::{bail, Result};
 use burn::module::Module;
@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::config::{Config, ModelConfig, ModelKind};
 use crate::data::targets::Targets;
 use crate::model::detection::Detection;
+use crate::model::mask2former::{Mask2Former, Mask2FormerConfig, Mask2FormerLosses};
 use crate::model::maskrcnn::{MaskRcnn, MaskRcnnConfig, MaskRcnnLosses};
 use crate::model::summary::ModelSummary;
 use crate::model::yolo::loss::{yolo_loss, LossTerms, LossWeights};
@@ -28,6 +29,7 @@ use super::evaluate::{VAL_IOU, VAL_MAX_DET};
 pub enum DetectorConfig {
     Yolo(YoloSegConfig),
     Maskrcnn(MaskRcnnConfig),
+    Mask2former(Mask2FormerConfig),
 }
 
 /// A trainable instance-segmentation model.
@@ -35,6 +37,7 @@ pub enum DetectorConfig {
 pub enum Detector {
     Yolo(YoloSeg),
     MaskRcnn(MaskRcnn),
+    Mask2Former(Mask2Former),
 }
 
 /// Loss of one training batch: the tensor to back-propagate and the host values of its
@@ -58,6 +61,9 @@ impl DetectorConfig {
             ModelConfig::Maskrcnn(m) => {
                 DetectorConfig::Maskrcnn(MaskRcnnConfig::from_config(m, input, nc))
             }
+            ModelConfig::Mask2former(m) => {
+                DetectorConfig::Mask2former(Mask2FormerConfig::from_config(m, input, nc))
+            }
         })
     }
 
@@ -65,6 +71,7 @@ impl DetectorConfig {
         match self {
             DetectorConfig::Yolo(_) => ModelKind::Yolo,
             DetectorConfig::Maskrcnn(_) => ModelKind::Maskrcnn,
+            DetectorConfig::Mask2former(_) => ModelKind::Mask2former,
         }
     }
 
@@ -72,6 +79,7 @@ impl DetectorConfig {
         match self {
             DetectorConfig::Yolo(c) => c.num_classes,
             DetectorConfig::Maskrcnn(c) => c.num_classes,
+            DetectorConfig::Mask2former(c) => c.num_classes,
         }
     }
 
@@ -80,6 +88,7 @@ impl DetectorConfig {
         match self {
             DetectorConfig::Yolo(c) => c.input_size,
             DetectorConfig::Maskrcnn(c) => c.input_size,
+            DetectorConfig::Mask2former(c) => c.input_size,
         }
     }
 
@@ -87,6 +96,7 @@ impl DetectorConfig {
         match self {
             DetectorConfig::Yolo(c) => Detector::Yolo(c.init(device)),
             DetectorConfig::Maskrcnn(c) => Detector::MaskRcnn(c.init(device)),
+            DetectorConfig::Mask2former(c) => Detector::Mask2Former(c.init(device)),
         }
     }
 
@@ -95,6 +105,8 @@ impl DetectorConfig {
         match self {
             DetectorConfig::Yolo(_) => crate::model::freeze::yolo_prefixes(n),
             DetectorConfig::Maskrcnn(_) => crate::model::freeze::maskrcnn_prefixes(n),
+            // Same ResNet, same module paths.
+            DetectorConfig::Mask2former(_) => crate::model::freeze::maskrcnn_prefixes(n),
         }
     }
 
@@ -113,6 +125,16 @@ impl DetectorConfig {
                 "Mask R-CNN R{}-FPN, width ×{}, FPN {}, RoIs {}/image, {} classes",
                 c.depth, c.width_mult, c.fpn_channels, c.roi.batch_per_image, c.num_classes
             ),
+            DetectorConfig::Mask2former(c) => format!(
+                "Mask2Former R{} (FPN pixel decoder), width ×{}, {} queries, {} layers × {} wide, {} points, {} classes",
+                c.depth,
+                c.width_mult,
+                c.queries,
+                c.dec_layers,
+                c.hidden_dim,
+                c.criterion.points,
+                c.num_classes
+            ),
         }
     }
 
@@ -121,6 +143,7 @@ impl DetectorConfig {
         let name = |k: ModelKind| match k {
             ModelKind::Yolo => "model.kind = \"yolo\"",
             ModelKind::Maskrcnn => "model.kind = \"maskrcnn\"",
+            ModelKind::Mask2former => "model.kind = \"mask2former\"",
         };
         if self.kind() != other.kind() {
             return Some(format!(
@@ -146,12 +169,14 @@ impl Detector {
         match self {
             Detector::Yolo(_) => &LossTerms::NAMES,
             Detector::MaskRcnn(_) => &MaskRcnnLosses::NAMES,
+            Detector::Mask2Former(_) => &Mask2FormerLosses::NAMES,
         }
     }
 
     /// Training loss of a batch. `images` are `[B, 3, H, W]` in `[0, 1]` (Mask R-CNN
-    /// normalises inside); `sample_seed` drives Mask R-CNN's anchor and RoI sampling, so a
-    /// step does not depend on what ran before it.
+    /// and Mask2Former normalise inside); `sample_seed` drives Mask R-CNN's anchor and RoI
+    /// sampling and Mask2Former's point sampling, so a step does not depend on what ran
+    /// before it.
     pub fn loss(&self, images: Tensor<4>, targets: &Targets, sample_seed: u64) -> StepLoss {
         match self {
             Detector::Yolo(m) => {
@@ -174,6 +199,16 @@ impl Detector {
                     total_value: v[5],
                 }
             }
+            Detector::Mask2Former(m) => {
+                let mut rng = ChaCha8Rng::seed_from_u64(sample_seed);
+                let l = m.forward_train(images, &targets.images, &mut rng);
+                let v = l.values();
+                StepLoss {
+                    total: l.total,
+                    terms: v[..3].to_vec(),
+                    total_value: v[3],
+                }
+            }
         }
     }
 
@@ -185,7 +220,8 @@ impl Detector {
 
     /// [`Self::predict`] and the seconds of the network alone: YOLO's forward pass up to
     /// its output tensors (box decoding and NMS excluded); Mask R-CNN's `forward_infer`
-    /// whole (its proposal, NMS and head stages interleave with the network). Wall clock
+    /// whole (its proposal, NMS and head stages interleave with the network); Mask2Former's
+    /// `forward_infer` whole (network and top-k postprocess). Wall clock
     /// on the eager CPU backends; a lazy GPU backend would move time into the postprocess.
     pub fn predict_timed(&self, images: Tensor<4>, conf: f32) -> (Vec<Vec<Detection>>, f64) {
         let t = std::time::Instant::now();
@@ -202,6 +238,13 @@ impl Detector {
                 }
                 (out, t.elapsed().as_secs_f64())
             }
+            Detector::Mask2Former(m) => {
+                let mut out = m.forward_infer(images);
+                for d in &mut out {
+                    d.retain(|x| x.score >= conf);
+                }
+                (out, t.elapsed().as_secs_f64())
+            }
         }
     }
 
@@ -209,6 +252,7 @@ impl Detector {
         match self {
             Detector::Yolo(m) => m.summary(input),
             Detector::MaskRcnn(m) => m.summary(input),
+            Detector::Mask2Former(m) => m.summary(input),
         }
     }
 }
@@ -260,6 +304,50 @@ mod tests {
         let y = DetectorConfig::from_config(&load("quickstart", &[]), 1).unwrap();
         assert_eq!(y.kind(), ModelKind::Yolo);
         assert_eq!(y.input_size(), 256);
+    }
+
+    #[test]
+    fn mask2former_keys_reach_the_model_config() {
+        let c = DetectorConfig::from_config(&load("mask2former_syn500", &[]), 1).unwrap();
+        let DetectorConfig::Mask2former(m) = &c else {
+            panic!("{c:?}")
+        };
+        let mut want = Mask2FormerConfig::new(50, 1);
+        want.input_size = 640;
+        assert_eq!(m, &want, "compact preset, 25 queries, 640 px");
+        let c = DetectorConfig::from_config(
+            &load(
+                "mask2former_syn750",
+                &[
+                    "model.preset=\"paper\"",
+                    "model.queries=30",
+                    "model.points=999",
+                    "model.depth=101",
+                ],
+            ),
+            2,
+        )
+        .unwrap();
+        let DetectorConfig::Mask2former(m) = &c else {
+            panic!("{c:?}")
+        };
+        assert_eq!((m.depth, m.num_classes, m.queries), (101, 2, 30));
+        assert_eq!(
+            (m.hidden_dim, m.dec_layers, m.criterion.points),
+            (256, 9, 999)
+        );
+        let y = DetectorConfig::from_config(&load("quickstart", &[]), 1).unwrap();
+        let e = c.mismatch(&y).unwrap();
+        assert!(e.contains("asks for model.kind = \"mask2former\""), "{e}");
+        let bad = config::load(
+            "mask2former_syn250",
+            &["model.hidden_dim=100".into(), "model.heads=8".into()],
+        );
+        let e = format!("{:#}", bad.unwrap_err());
+        assert!(
+            e.contains("model.hidden_dim = 100 must be even and a multiple of model.heads = 8"),
+            "{e}"
+        );
     }
 
     #[test]

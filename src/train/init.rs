@@ -4,8 +4,9 @@
 //!
 //! | file | model | what is loaded |
 //! |---|---|---|
-//! | chicktrain checkpoint (`.bpk`, either family) | same family | its `ema` weights (what it evaluates and ships), every tensor; with another class count the class-dependent ones are re-initialised and named |
+//! | chicktrain checkpoint (`.bpk`, any family) | same family | its `ema` weights (what it evaluates and ships), every tensor; with another class count the class-dependent ones are re-initialised and named |
 //! | PyTorch zip / safetensors | Mask R-CNN | a torchvision ImageNet ResNet (backbone) or `maskrcnn_resnet50_fpn` state dict ([`torchvision`]) |
+//! | PyTorch zip / safetensors | Mask2Former | the ResNet backbone of a torchvision ImageNet ResNet or Mask R-CNN state dict; the rest keeps its initialisation |
 //! | PyTorch zip / safetensors | YOLO | an ultralytics checkpoint or state dict ([`ultralytics`]); the class head is re-initialised for another class count, the mask head for a detection checkpoint |
 //!
 //! `--resume` ignores `model.init`: the run's `last.bpk` wins.
@@ -16,6 +17,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use burn::tensor::Device;
 
+use crate::model::mask2former;
 use crate::model::maskrcnn::{self, torchvision};
 use crate::model::weights::{self, Applied, Format};
 use crate::model::yolo::{self, ultralytics};
@@ -52,6 +54,7 @@ pub fn load_init(
                 let name = |k| match k {
                     crate::config::ModelKind::Yolo => "model.kind = \"yolo\"",
                     crate::config::ModelKind::Maskrcnn => "model.kind = \"maskrcnn\"",
+                    crate::config::ModelKind::Mask2former => "model.kind = \"mask2former\"",
                 };
                 bail!(
                     "{origin}: it holds a {} model ({}), the config asks for {}: weights of one family cannot start the other",
@@ -81,6 +84,15 @@ pub fn load_init(
                         &origin,
                     )?;
                     (Detector::MaskRcnn(m), a)
+                }
+                (Detector::Mask2Former(m), Detector::Mask2Former(s)) => {
+                    let (m, a) = weights::apply(
+                        m,
+                        weights::collect(&s),
+                        &mask2former::class_dependent,
+                        &origin,
+                    )?;
+                    (Detector::Mask2Former(m), a)
                 }
                 _ => unreachable!("kinds checked above"),
             };
@@ -114,6 +126,37 @@ pub fn load_init(
                 &mapped.file_keys,
             )?;
             (Detector::MaskRcnn(m), a, what)
+        }
+        (
+            Format::TorchLegacy | Format::TorchZip | Format::Safetensors,
+            Detector::Mask2Former(m),
+        ) => {
+            // The backbone is the Mask R-CNN family's ResNet under the same paths: a
+            // torchvision ResNet or Mask R-CNN file loads into it, the rest stays fresh.
+            let tensors = weights::read_file(path, &["model", "state_dict"])
+                .with_context(|| origin.clone())?;
+            let mapped = torchvision::map_state_dict(tensors, m.num_classes())
+                .with_context(|| origin.clone())?;
+            fresh_why = "a torchvision file holds the ResNet backbone only";
+            let what = match mapped.kind {
+                torchvision::TorchvisionKind::ResNet => {
+                    format!("{}, torchvision ResNet (backbone)", format.name())
+                }
+                _ => format!("{}, torchvision Mask R-CNN (its backbone)", format.name()),
+            };
+            let snapshots = mapped
+                .snapshots
+                .into_iter()
+                .filter(|s| s.name.starts_with("backbone."))
+                .collect();
+            let (m, a) = weights::apply_named(
+                m,
+                snapshots,
+                &|p: &str| !p.starts_with("backbone."),
+                &origin,
+                &mapped.file_keys,
+            )?;
+            (Detector::Mask2Former(m), a, what)
         }
         (Format::TorchLegacy | Format::TorchZip | Format::Safetensors, Detector::Yolo(m)) => {
             // ultralytics `.pt` (its `ema`, else `model`), a state dict or safetensors under

@@ -22,6 +22,16 @@ pub const BIAS: &str = r"(^|\.)(bias|beta)$";
 static BIAS_GROUP: std::sync::LazyLock<ParamGroup> =
     std::sync::LazyLock::new(|| ParamGroup::from_regex(BIAS).expect("BIAS is a valid regex"));
 
+/// Parameters `train.backbone_lr_mult` scales (every family names its backbone so), and
+/// their biases, which keep their warmup on the scaled rate.
+static BACKBONE_GROUP: std::sync::LazyLock<ParamGroup> = std::sync::LazyLock::new(|| {
+    ParamGroup::from_regex(r"^backbone\.").expect("backbone regex is valid")
+});
+static BACKBONE_BIAS_GROUP: std::sync::LazyLock<ParamGroup> = std::sync::LazyLock::new(|| {
+    ParamGroup::from_regex(r"^backbone\..*(^|\.)(bias|beta)$")
+        .expect("backbone bias regex is valid")
+});
+
 /// Factor of `lr` at (0-based) `epoch`, before warmup.
 pub fn epoch_factor(t: &TrainConfig, epoch: usize) -> f64 {
     let e = epoch as f64;
@@ -80,12 +90,15 @@ pub fn step_lr(
 ) -> (ModuleLearningRate, f64) {
     let lr = lr_at(t, epoch, iter, per_epoch);
     let bias = bias_lr_at(t, epoch, iter, per_epoch);
-    (
-        ModuleLrScheduler::new(lr)
-            .with_group(BIAS_GROUP.clone(), bias)
-            .step(),
-        lr,
-    )
+    // Burn takes the last group that matches a parameter.
+    let mut s = ModuleLrScheduler::new(lr).with_group(BIAS_GROUP.clone(), bias);
+    if t.backbone_lr_mult != 1.0 {
+        let m = t.backbone_lr_mult;
+        s = s
+            .with_group(BACKBONE_GROUP.clone(), lr * m)
+            .with_group(BACKBONE_BIAS_GROUP.clone(), bias * m);
+    }
+    (s.step(), lr)
 }
 
 #[cfg(test)]
@@ -185,6 +198,21 @@ mod tests {
         assert_eq!(rates.lr_from_param(id, Some("backbone.0.bn.beta")), bias);
         assert_eq!(rates.lr_from_param(id, Some("backbone.0.bn.gamma")), lr);
         assert_eq!(rates.lr_from_param(id, Some("unbiased")), lr);
+        t.backbone_lr_mult = 0.1;
+        let (rates, lr) = step_lr(&t, 0, 0, 10);
+        let scaled = |a: f64, b: f64| (a - b).abs() < 1e-15;
+        let r = |p: &str| rates.lr_from_param(id, Some(p));
+        assert!(scaled(r("backbone.stem.conv.weight"), lr * 0.1));
+        assert!(scaled(
+            r("backbone.stages.0.blocks.0.convs.0.bn.beta"),
+            bias * 0.1
+        ));
+        assert!(scaled(
+            r("backbone.stages.0.blocks.0.convs.0.bn.gamma"),
+            lr * 0.1
+        ));
+        assert_eq!(r("pixel_decoder.mask_features.bias"), bias);
+        assert_eq!(r("transformer_decoder.class_embed.weight"), lr);
     }
 
     #[test]

@@ -4,7 +4,8 @@ use crate::config::{Config, ModelConfig};
 
 /// 64 px images (no crop), at most 9 real and 4 synthetic images, 2 epochs, batch 4.
 /// A Mask R-CNN keeps its depth (so the R101 code paths run) but gets quarter widths,
-/// anchors sized for 64 px and a few dozen proposals and RoIs.
+/// anchors sized for 64 px and a few dozen proposals and RoIs. A Mask2Former keeps its
+/// depth, gets quarter widths, a 32-wide 3-layer decoder, ≤ 10 queries and 256 points.
 pub fn smoke_config(cfg: &mut Config) {
     cfg.name = format!("{}_smoke", cfg.name);
     let d = &mut cfg.data;
@@ -31,5 +32,16 @@ pub fn smoke_config(cfg: &mut Config) {
         m.roi_batch = Some(32);
         m.box_fc_dim = Some(64);
         m.mask_conv_dim = Some(32);
+    }
+    if let ModelConfig::Mask2former(m) = &mut cfg.model {
+        m.width_mult = m.width_mult.min(0.25);
+        m.conv_dim = Some(32);
+        m.mask_dim = Some(32);
+        m.hidden_dim = Some(32);
+        m.heads = Some(4);
+        m.ffn_dim = Some(64);
+        m.dec_layers = Some(m.dec_layers.unwrap_or(3).min(3));
+        m.queries = Some(m.queries.unwrap_or(10).min(10));
+        m.points = Some(256);
     }
 }
