@@ -211,3 +211,56 @@ fn describe(path: &Path, what: &str, a: &Applied, fresh_why: &str) -> String {
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::mask2former::Mask2FormerConfig;
+    use crate::util::tensor::to_host;
+
+    /// A torchvision ResNet or Mask R-CNN file loads the Mask2Former backbone (the same
+    /// ResNet under the same paths) with the file's values; everything else keeps its
+    /// fresh initialisation.
+    #[test]
+    fn torchvision_files_load_the_mask2former_backbone_only() {
+        let dev = Device::flex();
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/torchvision");
+        for (file, depth) in [("resnet18_w8.pth", 18), ("maskrcnn_r50_w8.pth", 50)] {
+            let mut c = Mask2FormerConfig::new(depth, 1);
+            c.width_mult = 0.125;
+            c.input_size = 64;
+            let cfg = DetectorConfig::Mask2former(c);
+            let fresh = cfg.init(&dev);
+            let Detector::Mask2Former(f) = &fresh else {
+                unreachable!()
+            };
+            let head_before = to_host(f.transformer_decoder.class_embed.weight.val());
+            let (m, msg) = load_init(fresh, &cfg, &root.join(file), &dev)
+                .unwrap_or_else(|e| panic!("{file}: {e:#}"));
+            assert!(msg.contains("backbone"), "{msg}");
+            let Detector::Mask2Former(m) = m else {
+                panic!("{file}: not a Mask2Former")
+            };
+            let mapped = torchvision::map_state_dict(
+                weights::read_file(&root.join(file), &["model", "state_dict"]).unwrap(),
+                1,
+            )
+            .unwrap();
+            let stem = mapped
+                .snapshots
+                .into_iter()
+                .find(|s| s.name == "backbone.stem.conv.weight")
+                .expect("the file has a stem");
+            let want = weights::snapshot_data(stem)
+                .unwrap()
+                .try_to_vec::<f32>()
+                .unwrap();
+            assert_eq!(to_host(m.backbone.stem.conv.weight.val()), want, "{file}");
+            assert_eq!(
+                to_host(m.transformer_decoder.class_embed.weight.val()),
+                head_before,
+                "{file}: the decoder keeps its initialisation"
+            );
+        }
+    }
+}
