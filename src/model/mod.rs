@@ -3,6 +3,8 @@
 //! - [`yolo`]: the YOLO11-seg-style one-stage model (its blocks, task-aligned assigner,
 //!   losses and postprocess).
 //! - [`maskrcnn`]: the two-stage Mask R-CNN (ResNet-FPN, RPN, RoIAlign, box and mask heads).
+//! - [`mask2former`]: the set-prediction Mask2Former (Mask R-CNN's ResNet, FPN pixel decoder,
+//!   masked-attention transformer decoder, Hungarian matching, point-sampled losses).
 //! - Shared by both: [`detection`] (what a model predicts, box IoU, NMS),
 //!   [`instance_mask`] (a detection's mask, decoded at the input or the original size), [`layers`]
 //!   (parameter and MAC counts, upsampling), [`loss`] (overflow-free primitives) and
