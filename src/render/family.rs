@@ -160,6 +160,14 @@ impl Family {
         Family::Round
     }
 
+    /// Generates every family's mesh now (in parallel), e.g. before timing renders.
+    pub fn prepare_all() {
+        use rayon::prelude::*;
+        Family::ALL.par_iter().for_each(|f| {
+            f.asset();
+        });
+    }
+
     /// The family's mesh, generated on first use and shared by the process; None for
     /// the broiler, whose mesh is the embedded asset the image already has.
     pub fn asset(self) -> Option<Arc<Asset>> {

@@ -172,8 +172,11 @@ impl SkinMaterial {
             if d >= 1.4 {
                 continue;
             }
+            // Irregular outline: a coarse and a fine noise push the edge in and out.
             let edge = fbm3(self.seed ^ (0xFA7 + k as u64), rest * 90.0, 2);
-            let a = ((1.15 - d - 0.5 * (edge - 0.5)) * 3.0).clamp(0.0, 1.0) * m.strength;
+            let lobe = value3(self.seed ^ (0x10BE + k as u64), rest / m.radius * 1.5);
+            let a = ((1.15 - d - 0.5 * (edge - 0.5) - 0.7 * (lobe - 0.5)) * 2.5).clamp(0.0, 1.0)
+                * m.strength;
             match m.kind {
                 MarkKind::Fat => fat = fat.max(a),
                 MarkKind::Bruise { hue } => {

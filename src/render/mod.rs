@@ -380,7 +380,10 @@ impl std::fmt::Display for BenchReport {
 pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::Result<BenchReport> {
     opts.validate()?;
     let asset = scene::asset(opts.carcass.as_ref())?;
-    // Warm-up (asset parse, thread pool start) outside the timed loop.
+    // Warm-up (asset parse, family meshes, thread pool start) outside the timed loop.
+    if opts.randomize.carcass && opts.carcass.is_none() {
+        family::Family::prepare_all();
+    }
     render_sample(opts, seed, u64::MAX)?;
     let mut sum = Timings::default();
     let t0 = Instant::now();
