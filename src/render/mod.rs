@@ -653,6 +653,11 @@ mod asset_tests {
         assert_eq!(s.image.dimensions(), (64, 48));
         assert_eq!(s.ids.len(), 64 * 48);
         assert!(!s.instances.is_empty());
+        // The carcass group keeps a user's mesh (families are the generator's): sizes,
+        // skin marks and tears apply, cuts need the generator's skin and are skipped.
+        o.randomize.carcass = true;
+        let s = render_sample(&o, 0, 0).unwrap();
+        assert!(!s.instances.is_empty());
         let _ = std::fs::remove_file(path);
     }
 }
