@@ -140,3 +140,28 @@ pub fn bench_render(
     let opts = preset_with(preset, size, randomize)?;
     Ok(crate::render::bench_render(&opts, images, seed)?.to_string())
 }
+
+#[cfg(test)]
+mod randomize_flag_tests {
+    use super::*;
+
+    #[test]
+    fn randomize_flag_parses_lists_and_refuses_unknown_groups_and_proxy() {
+        assert!(parse_randomize("none").unwrap().is_off());
+        assert_eq!(parse_randomize("all").unwrap(), Randomize::ALL);
+        let r = parse_randomize("carcass, lighting").unwrap();
+        assert!(r.carcass && r.lighting && !r.scene);
+        let e = format!("{:#}", parse_randomize("carcass,colour").unwrap_err());
+        assert!(e.contains("--randomize") && e.contains("colour"), "{e}");
+        let e = preset_with("proxy-real", 64, "carcass")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("proxy-real"), "{e}");
+        assert!(
+            preset_with("synthetic", 64, "carcass")
+                .unwrap()
+                .randomize
+                .carcass
+        );
+    }
+}
