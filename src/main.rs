@@ -152,6 +152,10 @@ enum Command {
         /// A carcass mesh (.glb, skinned or rigid) instead of the embedded one.
         #[arg(long)]
         carcass: Option<PathBuf>,
+        /// Domain-randomisation groups to switch on: a comma list of carcass, scene,
+        /// distractors, lighting, camera, physics, or `all` / `none`.
+        #[arg(long, default_value = "none")]
+        randomize: String,
     },
     /// Measure speed: `bench models` (model variants × sizes), `bench ablation` (what the
     /// scene needs), `bench coco` (the COCO evaluator), `bench render` (the renderer).
@@ -345,6 +349,9 @@ enum BenchWhat {
         preset: String,
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Domain-randomisation groups to switch on (as for `render`).
+        #[arg(long, default_value = "none")]
+        randomize: String,
     },
     /// Time load + evaluate + accumulate (bbox and segm) on a GT/DT pair.
     Coco {
@@ -385,7 +392,8 @@ impl BenchWhat {
                 images,
                 preset,
                 seed,
-            } => data::bench_render(size, images, &preset, seed),
+                randomize,
+            } => data::bench_render(size, images, &preset, seed, &randomize),
             BenchWhat::Models {
                 variants,
                 sizes,
@@ -507,7 +515,8 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             size,
             preset,
             carcass,
-        }) => data::render(&out, count, seed, size, &preset, carcass),
+            randomize,
+        }) => data::render(&out, count, seed, size, &preset, carcass, &randomize),
         Some(Command::Bench { what }) => what.run(),
         Some(Command::CocoEval {
             gt,

@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use crate::annotations::coco::{load_results, CocoDataset};
 use crate::annotations::{labelme, yolo_export};
 use crate::eval::{evaluate, IouType};
+use crate::render::randomize::Randomize;
 
 /// `chicktrain coco-eval`: the pycocotools summary (or one JSON object) for a GT/DT pair.
 pub fn coco_eval(gt: &Path, dt: &Path, iou_type: IouType, json: bool) -> Result<String> {
@@ -76,6 +77,32 @@ pub fn bench_coco(gt: &Path, dt: &Path, repeats: usize) -> Result<String> {
     Ok(out)
 }
 
+/// Options of `preset` at `size` with the `--randomize` groups on (proxy-real never
+/// randomises: it stands in for real photographs).
+fn preset_with(preset: &str, size: u32, randomize: &str) -> Result<crate::render::RenderOptions> {
+    let mut opts = crate::render::RenderOptions::preset(preset, size)?;
+    opts.randomize = parse_randomize(randomize)?;
+    anyhow::ensure!(
+        !opts.is_proxy() || opts.randomize.is_off(),
+        "--randomize {randomize}: the proxy-real preset never randomises (it stands in for \
+         real photos); use --preset synthetic"
+    );
+    Ok(opts)
+}
+
+/// The `--randomize` flag: `none`, `all`, or a comma list of group names.
+pub fn parse_randomize(list: &str) -> Result<Randomize> {
+    let mut r = Randomize::default();
+    for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        match name {
+            "none" => r = Randomize::default(),
+            "all" => r = Randomize::ALL,
+            g => r = r.with(g, true).context("--randomize")?,
+        }
+    }
+    Ok(r)
+}
+
 /// `chicktrain render`: a rendered, auto-labelled dataset with a preview sheet.
 pub fn render(
     out: &Path,
@@ -84,8 +111,9 @@ pub fn render(
     size: u32,
     preset: &str,
     carcass: Option<PathBuf>,
+    randomize: &str,
 ) -> Result<String> {
-    let mut opts = crate::render::RenderOptions::preset(preset, size)?;
+    let mut opts = preset_with(preset, size, randomize)?;
     opts.count = count;
     opts.seed = seed;
     opts.carcass = carcass;
@@ -102,7 +130,38 @@ pub fn render(
 }
 
 /// `chicktrain bench render`.
-pub fn bench_render(size: u32, images: usize, preset: &str, seed: u64) -> Result<String> {
-    let opts = crate::render::RenderOptions::preset(preset, size)?;
+pub fn bench_render(
+    size: u32,
+    images: usize,
+    preset: &str,
+    seed: u64,
+    randomize: &str,
+) -> Result<String> {
+    let opts = preset_with(preset, size, randomize)?;
     Ok(crate::render::bench_render(&opts, images, seed)?.to_string())
+}
+
+#[cfg(test)]
+mod randomize_flag_tests {
+    use super::*;
+
+    #[test]
+    fn randomize_flag_parses_lists_and_refuses_unknown_groups_and_proxy() {
+        assert!(parse_randomize("none").unwrap().is_off());
+        assert_eq!(parse_randomize("all").unwrap(), Randomize::ALL);
+        let r = parse_randomize("carcass, lighting").unwrap();
+        assert!(r.carcass && r.lighting && !r.scene);
+        let e = format!("{:#}", parse_randomize("carcass,colour").unwrap_err());
+        assert!(e.contains("--randomize") && e.contains("colour"), "{e}");
+        let e = preset_with("proxy-real", 64, "carcass")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("proxy-real"), "{e}");
+        assert!(
+            preset_with("synthetic", 64, "carcass")
+                .unwrap()
+                .randomize
+                .carcass
+        );
+    }
 }

@@ -3,6 +3,11 @@
 //! three-segment wings, meshed by surface nets on a 4 mm grid, with linear-blend bone
 //! weights for hips, knees, shoulders, elbows and wrists.
 //!
+//! The proportions come from a [`Body`] parameter set: [`Body::BROILER`] is the committed
+//! asset; the carcass randomisation group (`render::family`) generates other body
+//! families (heavy broiler, spent hen, poussin, long/narrow, round/wide) from other sets,
+//! each a different mesh with the same skeleton, so `skin.rs` poses them all.
+//!
 //! No permissively licensed carcass scan exists (`shared/notes/renderer.md`), so the asset
 //! is generated here and written to `assets/carcass.glb` by [`write_default_asset`]; the
 //! renderer embeds that file. Units are metres. The carcass frame is: +x towards the neck,
@@ -63,21 +68,149 @@ struct Side {
     tip: Vec3,
 }
 
-fn side(s: f32) -> Side {
-    Side {
-        hip: Vec3::new(-0.032, s * 0.048, -0.008),
-        knee: Vec3::new(0.004, s * 0.072, 0.032),
-        hock: Vec3::new(-0.112, s * 0.036, 0.056),
-        shoulder: Vec3::new(0.068, s * 0.058, 0.004),
-        elbow: Vec3::new(0.012, s * 0.098, -0.018),
-        wrist: Vec3::new(0.082, s * 0.104, -0.030),
-        tip: Vec3::new(0.030, s * 0.115, -0.045),
+/// Shape parameters of one body family. Every field is a factor on the broiler's
+/// proportions (1 = [`Body::BROILER`]); the limbs keep their attachment to the trunk.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Body {
+    /// Trunk length (x): back, breast, keel, vent and neck positions.
+    pub length: f32,
+    /// Trunk width (y): also moves hips and shoulders outwards.
+    pub width: f32,
+    /// Trunk depth (z, back to breast).
+    pub depth: f32,
+    /// Breast prominence: the breast lobes' height and width.
+    pub breast: f32,
+    /// Keel ridge size (a spent hen's keel shows; a broiler's is buried in breast).
+    pub keel: f32,
+    /// Back height: where the flattened back sits (below 1 = flatter, shallower back).
+    pub back: f32,
+    /// Thigh girth.
+    pub thigh: f32,
+    /// Drumstick girth.
+    pub drum: f32,
+    /// Leg length (hip to knee to hock).
+    pub leg: f32,
+    /// Wing size (segment lengths and girth).
+    pub wing: f32,
+    /// Neck stump length and girth.
+    pub neck: f32,
+    /// Tail (parson's nose) size.
+    pub tail: f32,
+}
+
+impl Body {
+    /// The default broiler (the committed asset).
+    pub const BROILER: Body = Body {
+        length: 1.0,
+        width: 1.0,
+        depth: 1.0,
+        breast: 1.0,
+        keel: 1.0,
+        back: 1.0,
+        thigh: 1.0,
+        drum: 1.0,
+        leg: 1.0,
+        wing: 1.0,
+        neck: 1.0,
+        tail: 1.0,
+    };
+
+    fn trunk(&self) -> Vec3 {
+        Vec3::new(self.length, self.width, self.depth)
+    }
+
+    /// Largest growth factor over the broiler (sizes the meshing grid).
+    fn growth(&self) -> f32 {
+        [
+            self.length,
+            self.width,
+            self.depth,
+            self.leg,
+            self.wing,
+            self.neck,
+            self.tail,
+            self.breast,
+            self.keel,
+            self.thigh,
+            self.drum,
+        ]
+        .into_iter()
+        .fold(1.0, f32::max)
+    }
+
+    /// Every factor finite and within [0.5, 2] (a shape the SDF meshes cleanly).
+    pub fn check(&self) -> anyhow::Result<()> {
+        let f = [
+            ("length", self.length),
+            ("width", self.width),
+            ("depth", self.depth),
+            ("breast", self.breast),
+            ("keel", self.keel),
+            ("back", self.back),
+            ("thigh", self.thigh),
+            ("drum", self.drum),
+            ("leg", self.leg),
+            ("wing", self.wing),
+            ("neck", self.neck),
+            ("tail", self.tail),
+        ];
+        for (name, v) in f {
+            anyhow::ensure!(
+                v.is_finite() && (0.5..=2.0).contains(&v),
+                "body factor {name} = {v} must be within [0.5, 2]"
+            );
+        }
+        Ok(())
     }
 }
 
-/// Joint pivots (rest pose) in joint order.
+impl Default for Body {
+    fn default() -> Self {
+        Body::BROILER
+    }
+}
+
+/// `p0` moved with its anchor (`anchor0` → `anchor`) and its distance from the anchor
+/// scaled by `k`. Written so that the broiler's points come out bit-identical.
+fn limb(p0: Vec3, anchor0: Vec3, anchor: Vec3, k: f32) -> Vec3 {
+    p0 + (anchor - anchor0) + (p0 - anchor0) * (k - 1.0)
+}
+
+fn side(b: &Body, s: f32) -> Side {
+    let t = b.trunk();
+    let hip0 = Vec3::new(-0.032, s * 0.048, -0.008);
+    let knee0 = Vec3::new(0.004, s * 0.072, 0.032);
+    let hock0 = Vec3::new(-0.112, s * 0.036, 0.056);
+    let shoulder0 = Vec3::new(0.068, s * 0.058, 0.004);
+    let elbow0 = Vec3::new(0.012, s * 0.098, -0.018);
+    let wrist0 = Vec3::new(0.082, s * 0.104, -0.030);
+    let tip0 = Vec3::new(0.030, s * 0.115, -0.045);
+    let hip = hip0 * t;
+    let knee = limb(knee0, hip0, hip, b.leg);
+    let hock = limb(hock0, knee0, knee, b.leg);
+    let shoulder = shoulder0 * t;
+    let elbow = limb(elbow0, shoulder0, shoulder, b.wing);
+    let wrist = limb(wrist0, elbow0, elbow, b.wing);
+    let tip = limb(tip0, wrist0, wrist, b.wing);
+    Side {
+        hip,
+        knee,
+        hock,
+        shoulder,
+        elbow,
+        wrist,
+        tip,
+    }
+}
+
+/// Joint pivots (rest pose) of the broiler, in joint order.
 pub fn joint_pivots() -> [Vec3; 11] {
-    let (l, r) = (side(1.0), side(-1.0));
+    joint_pivots_of(&Body::BROILER)
+}
+
+/// Joint pivots (rest pose) of body `b`, in joint order.
+pub fn joint_pivots_of(b: &Body) -> [Vec3; 11] {
+    let (l, r) = (side(b, 1.0), side(b, -1.0));
     [
         Vec3::ZERO,
         l.hip,
@@ -93,11 +226,29 @@ pub fn joint_pivots() -> [Vec3; 11] {
     ]
 }
 
+/// Where a wing ends (rest pose) on side `s` (+1 left, -1 right): the cut planes of
+/// missing parts need the tip, which is no joint.
+pub fn wing_tip(b: &Body, s: f32) -> Vec3 {
+    side(b, s).tip
+}
+
+/// Where a leg ends (the hock, feet removed) on side `s`.
+pub fn hock(b: &Body, s: f32) -> Vec3 {
+    side(b, s).hock
+}
+
 /// Points that are redder on a raw carcass (joints, hock cuts, wing tips), rest pose.
 pub fn red_spots() -> Vec<(Vec3, f32)> {
-    let mut v = vec![(Vec3::new(0.13, 0.0, -0.004), 0.022)]; // neck cut
+    red_spots_of(&Body::BROILER)
+}
+
+/// [`red_spots`] of body `b`.
+pub fn red_spots_of(b: &Body) -> Vec<(Vec3, f32)> {
+    // Neck cut.
+    let neck = Vec3::new(0.13 * b.length + 0.043 * (b.neck - 1.0), 0.0, -0.004);
+    let mut v = vec![(neck, 0.022)];
     for s in [1.0, -1.0] {
-        let p = side(s);
+        let p = side(b, s);
         v.push((p.hock, 0.016));
         v.push((p.knee, 0.018));
         v.push((p.elbow, 0.014));
@@ -107,71 +258,88 @@ pub fn red_spots() -> Vec<(Vec3, f32)> {
     v
 }
 
-/// The primitives with their bone: body parts on bone 0, limb segments on their joint.
-fn prims() -> Vec<(Prim, usize)> {
+/// The primitives of body `b` with their bone: body parts on bone 0, limb segments on
+/// their joint. Every broiler value is a literal times a factor of 1 (bit-identical).
+fn prims(b: &Body) -> Vec<(Prim, usize)> {
     use Prim::*;
+    let t = b.trunk();
+    let (l, w, d) = (b.length, b.width, b.depth);
+    let lobe_r = Vec3::new(0.085 * l, 0.043 * w * b.breast.sqrt(), 0.050 * d * b.breast);
+    let lobe_z = 0.018 * d * b.breast;
+    let neck_end = Vec3::new(0.128 * l + 0.043 * (b.neck - 1.0), 0.0, -0.004);
+    let neck_r = w * b.neck.sqrt();
     let mut v = vec![
         (
-            Ellipsoid(Vec3::new(0.0, 0.0, -0.002), Vec3::new(0.108, 0.070, 0.056)),
-            0,
-        ),
-        (
             Ellipsoid(
-                Vec3::new(0.030, 0.030, 0.018),
-                Vec3::new(0.085, 0.043, 0.050),
+                Vec3::new(0.0, 0.0, -0.002) * t,
+                Vec3::new(0.108, 0.070, 0.056) * t,
             ),
             0,
         ),
         (
-            Ellipsoid(
-                Vec3::new(0.030, -0.030, 0.018),
-                Vec3::new(0.085, 0.043, 0.050),
-            ),
+            Ellipsoid(Vec3::new(0.030 * l, 0.030 * w, lobe_z), lobe_r),
             0,
         ),
         (
-            Ellipsoid(Vec3::new(0.040, 0.0, 0.046), Vec3::new(0.070, 0.010, 0.020)),
+            Ellipsoid(Vec3::new(0.030 * l, -0.030 * w, lobe_z), lobe_r),
+            0,
+        ),
+        (
+            Ellipsoid(
+                Vec3::new(0.040, 0.0, 0.046) * t,
+                Vec3::new(0.070 * l, 0.010 * b.keel, 0.020 * d * b.keel),
+            ),
             0,
         ),
         (
             Cone(
-                Vec3::new(0.085, 0.0, 0.0),
-                Vec3::new(0.128, 0.0, -0.004),
-                0.030,
-                0.019,
+                Vec3::new(0.085 * l, 0.0, 0.0),
+                neck_end,
+                0.030 * neck_r,
+                0.019 * neck_r,
             ),
             0,
         ),
         (
             Ellipsoid(
-                Vec3::new(-0.112, 0.0, -0.010),
-                Vec3::new(0.026, 0.030, 0.020),
+                Vec3::new(-0.112, 0.0, -0.010) * t,
+                Vec3::new(0.026, 0.030, 0.020) * b.tail,
             ),
             0,
         ),
     ];
     for (s, base) in [(1.0f32, 1usize), (-1.0, 3)] {
-        let p = side(s);
-        v.push((Cone(p.hip, p.knee, 0.038, 0.028), base));
+        let p = side(b, s);
+        v.push((Cone(p.hip, p.knee, 0.038 * b.thigh, 0.028 * b.thigh), base));
         // Drumstick: the muscle swells below the knee, then tapers to the bare shank.
         let m1 = p.knee + (p.hock - p.knee) * 0.3;
         let m2 = p.knee + (p.hock - p.knee) * 0.88;
-        v.push((Cone(p.knee, m1, 0.025, 0.028), base + 1));
-        v.push((Cone(m1, m2, 0.028, 0.0095), base + 1));
-        v.push((Ellipsoid(p.hock, Vec3::new(0.013, 0.012, 0.012)), base + 1));
+        v.push((Cone(p.knee, m1, 0.025 * b.drum, 0.028 * b.drum), base + 1));
+        v.push((Cone(m1, m2, 0.028 * b.drum, 0.0095 * b.drum), base + 1));
+        v.push((
+            Ellipsoid(p.hock, Vec3::new(0.013, 0.012, 0.012) * b.drum.sqrt()),
+            base + 1,
+        ));
     }
+    let g = b.wing;
     for (s, base) in [(1.0f32, 5usize), (-1.0, 8)] {
-        let p = side(s);
-        v.push((Cone(p.shoulder, p.elbow, 0.021, 0.014), base));
+        let p = side(b, s);
+        v.push((Cone(p.shoulder, p.elbow, 0.021 * g, 0.014 * g), base));
         // The flat and the tip are flat: two parallel cones side by side in the wing plane.
         let flat =
             |a: Vec3, b: Vec3, half: f32| (b - a).cross(Vec3::Z).normalize_or(Vec3::X) * half;
-        let o = flat(p.elbow, p.wrist, 0.006);
-        v.push((Cone(p.elbow + o, p.wrist + o * 0.6, 0.012, 0.009), base + 1));
-        v.push((Cone(p.elbow - o, p.wrist - o * 0.6, 0.012, 0.009), base + 1));
-        let o = flat(p.wrist, p.tip, 0.005);
-        v.push((Cone(p.wrist + o, p.tip, 0.009, 0.004), base + 2));
-        v.push((Cone(p.wrist - o, p.tip, 0.009, 0.004), base + 2));
+        let o = flat(p.elbow, p.wrist, 0.006 * g);
+        v.push((
+            Cone(p.elbow + o, p.wrist + o * 0.6, 0.012 * g, 0.009 * g),
+            base + 1,
+        ));
+        v.push((
+            Cone(p.elbow - o, p.wrist - o * 0.6, 0.012 * g, 0.009 * g),
+            base + 1,
+        ));
+        let o = flat(p.wrist, p.tip, 0.005 * g);
+        v.push((Cone(p.wrist + o, p.tip, 0.009 * g, 0.004 * g), base + 2));
+        v.push((Cone(p.wrist - o, p.tip, 0.009 * g, 0.004 * g), base + 2));
     }
     v
 }
@@ -225,6 +393,27 @@ fn smin(a: f32, b: f32, k: f32) -> f32 {
 /// Signed distance of the whole carcass plus the per-bone distances (for weights).
 struct Sdf {
     prims: Vec<(Prim, usize)>,
+    /// Back plane height (z), vent centre and radius, neck-opening centre and radius.
+    back_z: f32,
+    vent: (Vec3, f32),
+    neck: (Vec3, f32),
+}
+
+impl Sdf {
+    fn new(b: &Body) -> Sdf {
+        Sdf {
+            prims: prims(b),
+            back_z: 0.050 * b.depth * b.back,
+            vent: (
+                Vec3::new(-0.128 * b.length, 0.0, 0.012 * b.depth),
+                0.02 * b.width,
+            ),
+            neck: (
+                Vec3::new(0.142 * b.length + 0.043 * (b.neck - 1.0), 0.0, -0.004),
+                0.012 * b.width * b.neck.sqrt(),
+            ),
+        }
+    }
 }
 
 impl Sdf {
@@ -238,12 +427,12 @@ impl Sdf {
             d = if d.is_infinite() { pd } else { smin(d, pd, k) };
         }
         // Flatten the back a little (the carcass rests on it breast-up).
-        let back = -(p.z + 0.050);
+        let back = -(p.z + self.back_z);
         let d = smax(d, back, 0.012);
         // The body-cavity opening at the rear (vent removed in evisceration), between
         // the hocks, and the neck opening at the front: soft-edged hollows.
-        let vent = (p - Vec3::new(-0.128, 0.0, 0.012)).length() - 0.02;
-        let neck = (p - Vec3::new(0.142, 0.0, -0.004)).length() - 0.012;
+        let vent = (p - self.vent.0).length() - self.vent.1;
+        let neck = (p - self.neck.0).length() - self.neck.1;
         smax(smax(d, -vent, 0.008), -neck, 0.006)
     }
 
@@ -269,9 +458,16 @@ fn smax(a: f32, b: f32, k: f32) -> f32 {
 
 /// Builds the default carcass mesh (rest pose, skinned). Deterministic.
 pub fn generate(cell: f32) -> Mesh {
-    let sdf = Sdf { prims: prims() };
-    let lo = Vec3::new(-0.16, -0.18, -0.08);
-    let hi = Vec3::new(0.17, 0.18, 0.10);
+    generate_body(&Body::BROILER, cell)
+}
+
+/// Builds the carcass mesh of body `b` (rest pose, skinned, the same joints as the
+/// broiler with pivots moved to `b`'s anatomy). Deterministic.
+pub fn generate_body(b: &Body, cell: f32) -> Mesh {
+    let sdf = Sdf::new(b);
+    let g = b.growth();
+    let lo = Vec3::new(-0.16, -0.18, -0.08) * g;
+    let hi = Vec3::new(0.17, 0.18, 0.10) * g;
     let (positions, indices) = surface_nets(&sdf, lo, hi, cell);
     // Pull vertices onto the surface (surface nets vertices sit inside their cell).
     let positions: Vec<Vec3> = positions
@@ -288,7 +484,7 @@ pub fn generate(cell: f32) -> Mesh {
     let normals: Vec<Vec3> = positions.par_iter().map(|&p| sdf.gradient(p)).collect();
     let (vertex_joints, vertex_weights): (Vec<[u16; 4]>, Vec<[f32; 4]>) =
         positions.par_iter().map(|&p| bone_weights(&sdf, p)).unzip();
-    let pivots = joint_pivots();
+    let pivots = joint_pivots_of(b);
     let joints = JOINT_NAMES
         .iter()
         .zip(JOINT_PARENTS)

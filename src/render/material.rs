@@ -9,7 +9,7 @@
 use glam::{Vec2, Vec3};
 use rand::Rng;
 
-use super::noise::{cellular3, fbm2, fbm3, value2};
+use super::noise::{cellular3, fbm2, fbm3, value2, value3};
 
 /// What the integrator needs to know about a surface point.
 #[derive(Clone, Copy, Debug)]
@@ -46,6 +46,51 @@ pub struct SkinMaterial {
     pub blotch: f32,
     /// Torn-skin patches (rest-space centre, radius): exposed meat, darker and matte.
     pub tears: Vec<(Vec3, f32)>,
+    /// Fat deposits and bruises (carcass randomisation group; empty without it).
+    pub marks: Vec<SkinMark>,
+    /// Feather remnants (pin feathers, stubs): 0 = none … 1 = many (carcass group).
+    pub pins: f32,
+}
+
+/// What a [`SkinMark`] is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MarkKind {
+    /// Subcutaneous fat: yellower, smoother (fewer visible follicles), glossier.
+    Fat,
+    /// Bruise: blood under the skin, dark red (`hue` 0) to purple (`hue` 1).
+    Bruise { hue: f32 },
+}
+
+/// A noisy-edged patch on the skin around a rest-space point of the carcass's surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SkinMark {
+    pub centre: Vec3,
+    pub radius: f32,
+    /// Opacity at the centre (0..1).
+    pub strength: f32,
+    pub kind: MarkKind,
+}
+
+/// Redness values above 1 are tissue codes of cut surfaces (the caps of removed wings
+/// and legs, `render::parts`): [`CUT_MEAT`] on the cap, [`CUT_BONE`] at its centre where
+/// a bone was cut through; interpolation between them shades the rim to the bone.
+pub const CUT_MEAT: f32 = 2.0;
+/// See [`CUT_MEAT`].
+pub const CUT_BONE: f32 = 3.0;
+
+/// Skin tone of the carcass group: 0 pale pink-white … 0.5 cream … 1 deep yellow
+/// (corn-fed), linear RGB. Wider than the base look's pink…yellow ramp at both ends.
+pub fn skin_tone(t: f32) -> Vec3 {
+    let stops = [
+        srgb8(250, 228, 218),
+        srgb8(242, 204, 186),
+        srgb8(245, 222, 190),
+        srgb8(246, 212, 150),
+        srgb8(238, 192, 116),
+    ];
+    let x = t.clamp(0.0, 1.0) * (stops.len() - 1) as f32;
+    let i = (x as usize).min(stops.len() - 2);
+    stops[i].lerp(stops[i + 1], x - i as f32)
 }
 
 /// Linear value of an sRGB byte triple.
@@ -95,12 +140,64 @@ impl SkinMaterial {
                     (c, rng.random_range(0.008..0.02))
                 })
                 .collect(),
+            marks: Vec::new(),
+            pins: 0.0,
         }
+    }
+
+    /// Cut surface (redness code above 1, see [`CUT_MEAT`]): dark red muscle, wet, with
+    /// cream bone / cartilage where a limb bone was cut.
+    fn cut_surface(&self, rest: Vec3, n: Vec3, code: f32) -> Surface {
+        let v = fbm3(self.seed ^ 0xC07, rest * 160.0, 2);
+        let meat = srgb8(170, 62, 60).lerp(srgb8(205, 100, 96), v);
+        let bone = ((code - CUT_MEAT - 0.72) * 6.0).clamp(0.0, 1.0);
+        let albedo = meat.lerp(srgb8(236, 222, 200), bone);
+        Surface {
+            albedo,
+            normal: n,
+            f0: Vec3::splat(0.05),
+            roughness: 0.3 + 0.2 * v,
+            metallic: 0.0,
+            wrap: 0.5,
+            sss_tint: Vec3::new(1.0, 0.3, 0.25),
+            coat: 0.03,
+        }
+    }
+
+    /// Fat and bruise cover at `rest`: (fat opacity, bruise opacity, bruise colour).
+    fn marks_at(&self, rest: Vec3) -> (f32, f32, Vec3) {
+        let (mut fat, mut bruise, mut colour) = (0.0f32, 0.0f32, Vec3::ZERO);
+        for (k, m) in self.marks.iter().enumerate() {
+            let d = (rest - m.centre).length() / m.radius;
+            if d >= 1.4 {
+                continue;
+            }
+            // Irregular outline: a coarse and a fine noise push the edge in and out.
+            let edge = fbm3(self.seed ^ (0xFA7 + k as u64), rest * 90.0, 2);
+            let lobe = value3(self.seed ^ (0x10BE + k as u64), rest / m.radius * 1.5);
+            let a = ((1.15 - d - 0.5 * (edge - 0.5) - 0.7 * (lobe - 0.5)) * 2.5).clamp(0.0, 1.0)
+                * m.strength;
+            match m.kind {
+                MarkKind::Fat => fat = fat.max(a),
+                MarkKind::Bruise { hue } => {
+                    if a > bruise {
+                        bruise = a;
+                        // Mottled: darker where the noise is high (blood pooled).
+                        colour =
+                            srgb8(150, 38, 42).lerp(srgb8(98, 46, 84), hue) * (0.8 + 0.4 * edge);
+                    }
+                }
+            }
+        }
+        (fat, bruise, colour)
     }
 
     /// Skin at a hit: `rest` is the rest-pose position, `n` the interpolated normal,
     /// `redness` the interpolated joint redness (0..1).
     pub fn surface(&self, rest: Vec3, n: Vec3, redness: f32) -> Surface {
+        if redness > 1.0 {
+            return self.cut_surface(rest, n, redness);
+        }
         // Low-frequency colour variation and blotchy redness (bruising, blood under skin).
         let v = fbm3(self.seed, rest * 28.0, 2);
         let blotch = (fbm3(self.seed ^ 0xB10, rest * 45.0, 2) - 0.55).max(0.0) * 2.2 * self.blotch;
@@ -120,18 +217,46 @@ impl SkinMaterial {
         if torn > 0.0 {
             albedo = albedo.lerp(srgb8(196, 96, 92), torn * 0.85);
         }
+        let (fat, bruise, bruise_rgb) = if self.marks.is_empty() {
+            (0.0, 0.0, Vec3::ZERO)
+        } else {
+            self.marks_at(rest)
+        };
+        if fat > 0.0 {
+            albedo = albedo.lerp(srgb8(240, 212, 140) * (0.9 + 0.2 * v), fat * 0.8);
+        }
+        if bruise > 0.0 {
+            albedo = albedo.lerp(bruise_rgb, bruise);
+        }
         let mut normal = n;
+        // Fat smooths the skin over the follicles.
+        let bump = self.follicle_bump * (1.0 - 0.8 * fat);
         if d < 0.45 {
             let t = off - n * off.dot(n);
-            let profile = (1.0 - d / 0.45) * self.follicle_bump;
+            let profile = (1.0 - d / 0.45) * bump;
             normal = (n - t.normalize_or_zero() * profile).normalize_or(n);
             albedo *= 1.0 - 0.03 * (1.0 - d / 0.45);
+        }
+        if self.pins > 0.0 && torn < 0.5 {
+            // Feather remnants: sparse dark stubs, ~1 x 3 mm (stretched along the body
+            // axis, as feathers lie), in clusters where a low-frequency mask is high.
+            let cluster = value3(self.seed ^ 0x9E11, rest * 20.0);
+            if cluster > 1.0 - 0.45 * self.pins {
+                let (dp, offp) =
+                    cellular3(self.seed ^ 0x9175, rest * Vec3::new(55.0, 140.0, 140.0));
+                if dp < 0.22 {
+                    let k = 1.0 - dp / 0.22;
+                    albedo = albedo.lerp(srgb8(70, 56, 48), k * 0.85);
+                    let t = offp - n * offp.dot(n);
+                    normal = (normal + t.normalize_or_zero() * k * 0.6).normalize_or(n);
+                }
+            }
         }
         Surface {
             albedo,
             normal,
-            f0: Vec3::splat(self.wet),
-            roughness: self.roughness * (0.8 + 0.4 * v) + 0.15 * torn,
+            f0: Vec3::splat(self.wet * (1.0 + 0.4 * fat)),
+            roughness: self.roughness * (0.8 + 0.4 * v) * (1.0 - 0.3 * fat) + 0.15 * torn,
             metallic: 0.0,
             wrap: self.wrap,
             sss_tint: Vec3::new(1.0, 0.42, 0.32),

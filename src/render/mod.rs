@@ -12,18 +12,22 @@
 //! One concept per file: `carcass` (generator), `glb` (asset I/O), `mesh`, `skin` (poses),
 //! `pile` (heightfield drop), `camera`, `light`, `material`, `noise`, `trace` (BVH rays +
 //! shading), `screen` (raster primary visibility, shadow filter, crevices), `sensor`,
-//! `labels`, `scene` (sampling), `preset` (options), `export` (COCO + preview), `cache`.
+//! `labels`, `scene` (sampling), `preset` (options), `export` (COCO + preview), `cache`;
+//! the carcass randomisation group: `family` (body families), `parts` (wings and legs
+//! posed or cut), `variety` (per-carcass draws: family, size, parts, skin marks, tears).
 
 pub mod cache;
 pub mod camera;
 pub mod carcass;
 pub mod export;
+pub mod family;
 pub mod glb;
 pub mod labels;
 pub mod light;
 pub mod material;
 pub mod mesh;
 pub mod noise;
+pub mod parts;
 pub mod pile;
 pub mod preset;
 pub mod randomize;
@@ -32,6 +36,7 @@ pub mod screen;
 pub mod sensor;
 pub mod skin;
 pub mod trace;
+pub mod variety;
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -375,7 +380,10 @@ impl std::fmt::Display for BenchReport {
 pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::Result<BenchReport> {
     opts.validate()?;
     let asset = scene::asset(opts.carcass.as_ref())?;
-    // Warm-up (asset parse, thread pool start) outside the timed loop.
+    // Warm-up (asset parse, family meshes, thread pool start) outside the timed loop.
+    if opts.randomize.carcass && opts.carcass.is_none() {
+        family::Family::prepare_all();
+    }
     render_sample(opts, seed, u64::MAX)?;
     let mut sum = Timings::default();
     let t0 = Instant::now();
@@ -540,6 +548,49 @@ mod tests {
     }
 
     #[test]
+    fn carcass_group_is_deterministic_and_labels_every_piece() {
+        let mut o = small(96);
+        o.carcasses = [5, 8];
+        o.randomize.carcass = true;
+        let mut differs = 0;
+        for i in 0..3 {
+            let a = render_sample(&o, 9, i).unwrap();
+            // Second render on a one-thread pool: same pixels, ids and labels.
+            let b = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .unwrap()
+                .install(|| render_sample(&o, 9, i))
+                .unwrap();
+            assert!(
+                a.image == b.image && a.ids == b.ids,
+                "image {i} not reproducible"
+            );
+            assert_eq!(
+                serde_json::to_string(&a.instances).unwrap(),
+                serde_json::to_string(&b.instances).unwrap()
+            );
+            // Every visible pixel belongs to a placed carcass, and each kept instance's
+            // mask is exactly its ids (caps and cut pieces carry their carcass's id).
+            assert!(a.ids.iter().all(|&id| (id as usize) <= a.placed));
+            for inst in &a.instances {
+                let px = a.ids.iter().filter(|&&id| id == inst.id).count() as u64;
+                assert_eq!(px, inst.visible_px);
+                assert!(px > 0 && inst.visible_px <= inst.amodal_px);
+            }
+            let mut off = o.clone();
+            off.randomize.carcass = false;
+            if render_sample(&off, 9, i).unwrap().image != a.image {
+                differs += 1;
+            }
+        }
+        assert_eq!(
+            differs, 3,
+            "the carcass group changed only {differs}/3 images"
+        );
+    }
+
+    #[test]
     fn raster_primary_matches_traced_primary() {
         let mut o = small(96);
         let s1 = render_sample(&o, 3, 0).unwrap();
@@ -601,6 +652,11 @@ mod asset_tests {
         let s = render_sample(&o, 0, 0).unwrap();
         assert_eq!(s.image.dimensions(), (64, 48));
         assert_eq!(s.ids.len(), 64 * 48);
+        assert!(!s.instances.is_empty());
+        // The carcass group keeps a user's mesh (families are the generator's): sizes,
+        // skin marks and tears apply, cuts need the generator's skin and are skipped.
+        o.randomize.carcass = true;
+        let s = render_sample(&o, 0, 0).unwrap();
         assert!(!s.instances.is_empty());
         let _ = std::fs::remove_file(path);
     }

@@ -3,6 +3,7 @@
 //! and plate, and the sensor. Every choice is drawn from the per-image ChaCha stream in a
 //! fixed order, so (dataset seed, image index) fixes the scene exactly.
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -21,8 +22,10 @@ use super::preset::RenderOptions;
 use super::sensor::Sensor;
 use super::skin::{pose_mesh, Pose};
 use super::trace::{Geometry, Look};
+use super::variety::Variety;
 
 /// A carcass mesh ready to instance: the mesh and its per-vertex redness.
+#[derive(Clone)]
 pub struct Asset {
     pub mesh: Mesh,
     pub redness: Vec<f32>,
@@ -42,6 +45,11 @@ impl Asset {
         } else {
             Vec::new()
         };
+        Asset::with_spots(mesh, &spots)
+    }
+
+    /// An asset whose redness comes from `spots` (rest-space centre, radius).
+    pub fn with_spots(mesh: Mesh, spots: &[(Vec3, f32)]) -> Asset {
         let redness = mesh
             .positions
             .iter()
@@ -123,12 +131,19 @@ pub fn sample<R: Rng>(
     opts: &RenderOptions,
     asset: &Asset,
 ) -> Scene {
-    let _ = streams;
     let n = rng.random_range(opts.carcasses[0]..=opts.carcasses[1].max(opts.carcasses[0])) as usize;
     let density = uni(rng, opts.density);
     let view = View::sample(rng, opts);
     let layout = PileLayout::sample(rng, opts, &view, n, density);
-    let (plans, skins) = plan_carcasses(rng, opts, &layout, n);
+    let (mut plans, mut skins) = plan_carcasses(rng, opts, &layout, n);
+    if opts.randomize.carcass {
+        let mut stream = streams.rng(opts, "carcass");
+        for (plan, skin) in plans.iter_mut().zip(&mut skins) {
+            let mut r = Variety::instance_rng(&mut stream);
+            let user = opts.carcass.is_some();
+            plan.variety = Some(Variety::sample(&mut r, asset, user, &mut plan.pose, skin));
+        }
+    }
     let (geo, resting) = build_pile(asset, &layout, plans);
     let lighting = Lighting::sample(rng, opts, view.look_at);
     let background = Background::sample(
@@ -233,6 +248,8 @@ struct CarcassPlan {
     mode: RestingMode,
     rotation: Quat,
     candidates: Vec<Vec2>,
+    /// Family, parts and torn skin (carcass randomisation group only).
+    variety: Option<Variety>,
 }
 
 /// Draws every carcass's pose, resting mode, rotation, drop candidates and skin, in a
@@ -265,6 +282,7 @@ fn plan_carcasses<R: Rng>(
             mode,
             rotation,
             candidates,
+            variety: None,
         });
     }
     (plans, skins)
@@ -282,21 +300,32 @@ fn build_pile(
     let mut hf = HeightField::around(layout.centre, layout.radius + 0.45, 0.004);
     let mut geo = Geometry::default();
     let mut resting = Vec::with_capacity(plans.len());
+    // Each carcass's own mesh (its family's, cut and torn) when the carcass group is on.
+    let bodies: Vec<Cow<Asset>> = plans
+        .par_iter()
+        .map(|plan| match &plan.variety {
+            Some(v) => v.build(asset),
+            None => Cow::Borrowed(asset),
+        })
+        .collect();
     let posed: Vec<(Vec<Vec3>, Vec<Vec3>)> = plans
         .par_iter()
-        .map(|plan| {
-            let (pos, nor) = pose_mesh(&asset.mesh, &plan.pose);
+        .zip(&bodies)
+        .map(|(plan, body)| {
+            let (pos, nor) = pose_mesh(&body.mesh, &plan.pose);
             pile::orient(&pos, &nor, plan.rotation)
         })
         .collect();
-    for (inst, ((local, mut nor), plan)) in posed.into_iter().zip(plans).enumerate() {
+    for (inst, (((local, mut nor), plan), body)) in
+        posed.into_iter().zip(&plans).zip(&bodies).enumerate()
+    {
         let placed = pile::drop_one(&mut hf, &local, &mut nor, &plan.candidates);
         let base = geo.positions.len() as u32;
         geo.positions.extend(placed);
         geo.normals.extend(nor);
-        geo.rest.extend_from_slice(&asset.mesh.positions);
-        geo.redness.extend_from_slice(&asset.redness);
-        for t in asset.mesh.indices.chunks_exact(3) {
+        geo.rest.extend_from_slice(&body.mesh.positions);
+        geo.redness.extend_from_slice(&body.redness);
+        for t in body.mesh.indices.chunks_exact(3) {
             geo.triangles.push([t[0] + base, t[1] + base, t[2] + base]);
             geo.tri_instance.push(inst as u16);
         }

@@ -36,7 +36,7 @@ pub struct Geometry {
     pub normals: Vec<Vec3>,
     /// Rest-pose position per vertex (texture space of the skin).
     pub rest: Vec<Vec3>,
-    /// Joint redness per vertex (0..1).
+    /// Joint redness per vertex (0..1); above 1, cut-surface codes (`material::CUT_MEAT`).
     pub redness: Vec<f32>,
     pub triangles: Vec<[u32; 3]>,
     /// Instance index (0-based) per triangle.
