@@ -30,6 +30,7 @@ pub mod randomize;
 pub mod scene;
 pub mod screen;
 pub mod sensor;
+pub mod settle;
 pub mod skin;
 pub mod trace;
 
@@ -57,6 +58,8 @@ pub const RENDERER_VERSION: &str = "chicktrain-render-1";
 pub struct Timings {
     /// Pose, skinning, pile drop, light/camera sampling.
     pub scene: Duration,
+    /// The part of `scene` spent settling the pile with physics (physics group on).
+    pub physics: Duration,
     pub build: Duration,
     pub trace: Duration,
     /// Amodal raster + label statistics.
@@ -70,6 +73,7 @@ pub struct Timings {
 impl std::ops::AddAssign for Timings {
     fn add_assign(&mut self, o: Timings) {
         self.scene += o.scene;
+        self.physics += o.physics;
         self.build += o.build;
         self.trace += o.trace;
         self.labels += o.labels;
@@ -189,6 +193,7 @@ pub fn render_sample(
         placed: n,
         timings: Timings {
             scene: t_scene,
+            physics: sc.physics_time,
             build: tracer.build_time,
             trace: t_trace,
             labels: t_labels,
@@ -349,7 +354,7 @@ impl std::fmt::Display for BenchReport {
         write!(
             f,
             "{} images {}x{} on {} threads: {:.2} images/s concurrent, {:.2} images/s one at a \
-             time ({:.0} ms/image); per image: scene {:.1} ms, build {:.1} ms, trace {:.1} ms, \
+             time ({:.0} ms/image); per image: scene {:.1} ms (physics {:.1} ms), build {:.1} ms, trace {:.1} ms, \
              labels {:.1} ms, sensor {:.1} ms, encode {:.1} ms; {:.0} triangles",
             self.images,
             self.width,
@@ -359,6 +364,7 @@ impl std::fmt::Display for BenchReport {
             self.sequential_images_per_sec,
             ms(self.wall) / self.images.max(1) as f64,
             ms(self.mean.scene),
+            ms(self.mean.physics),
             ms(self.mean.build),
             ms(self.mean.trace),
             ms(self.mean.labels),
@@ -400,6 +406,7 @@ pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::R
     let n = images.max(1) as u32;
     let mean = Timings {
         scene: sum.scene / n,
+        physics: sum.physics / n,
         build: sum.build / n,
         trace: sum.trace / n,
         labels: sum.labels / n,
