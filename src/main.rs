@@ -152,6 +152,10 @@ enum Command {
         /// A carcass mesh (.glb, skinned or rigid) instead of the embedded one.
         #[arg(long)]
         carcass: Option<PathBuf>,
+        /// Randomisation groups to turn on: `none` (the preset's base look), `all`, or a
+        /// comma-separated list of carcass, scene, distractors, lighting, camera, physics.
+        #[arg(long, default_value = "none")]
+        randomize: String,
     },
     /// Measure speed: `bench models` (model variants × sizes), `bench ablation` (what the
     /// scene needs), `bench coco` (the COCO evaluator), `bench render` (the renderer).
@@ -344,6 +348,10 @@ enum BenchWhat {
         preset: String,
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Randomisation groups to turn on: `none` (the preset's base look), `all`, or a
+        /// comma-separated list of carcass, scene, distractors, lighting, camera, physics.
+        #[arg(long, default_value = "none")]
+        randomize: String,
     },
     /// Time load + evaluate + accumulate (bbox and segm) on a GT/DT pair.
     Coco {
@@ -384,7 +392,8 @@ impl BenchWhat {
                 images,
                 preset,
                 seed,
-            } => data::bench_render(size, images, &preset, seed),
+                randomize,
+            } => data::bench_render(size, images, &preset, seed, &randomize),
             BenchWhat::Models {
                 variants,
                 sizes,
@@ -506,7 +515,8 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             size,
             preset,
             carcass,
-        }) => data::render(&out, count, seed, size, &preset, carcass),
+            randomize,
+        }) => data::render(&out, count, seed, size, &preset, carcass, &randomize),
         Some(Command::Bench { what }) => what.run(),
         Some(Command::CocoEval {
             gt,

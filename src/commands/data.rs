@@ -84,8 +84,10 @@ pub fn render(
     size: u32,
     preset: &str,
     carcass: Option<PathBuf>,
+    randomize: &str,
 ) -> Result<String> {
     let mut opts = crate::render::RenderOptions::preset(preset, size)?;
+    opts.randomize = crate::render::randomize::Randomize::parse_list(randomize)?;
     opts.count = count;
     opts.seed = seed;
     opts.carcass = carcass;
@@ -102,7 +104,14 @@ pub fn render(
 }
 
 /// `chicktrain bench render`.
-pub fn bench_render(size: u32, images: usize, preset: &str, seed: u64) -> Result<String> {
-    let opts = crate::render::RenderOptions::preset(preset, size)?;
+pub fn bench_render(
+    size: u32,
+    images: usize,
+    preset: &str,
+    seed: u64,
+    randomize: &str,
+) -> Result<String> {
+    let mut opts = crate::render::RenderOptions::preset(preset, size)?;
+    opts.randomize = crate::render::randomize::Randomize::parse_list(randomize)?;
     Ok(crate::render::bench_render(&opts, images, seed)?.to_string())
 }
