@@ -58,7 +58,8 @@ pub const RENDERER_VERSION: &str = "chicktrain-render-1";
 pub struct Timings {
     /// Pose, skinning, pile drop, light/camera sampling.
     pub scene: Duration,
-    /// The part of `scene` spent settling the pile with physics (physics group on).
+    /// The part of `scene` spent posing the carcasses and settling them with physics
+    /// (physics group on; zero for the height-field drop, whose posing is in `scene` only).
     pub physics: Duration,
     pub build: Duration,
     pub trace: Duration,

@@ -89,7 +89,7 @@ pub struct Scene {
     pub resting: Vec<RestingMode>,
     pub density: f32,
     pub jpeg_quality: u8,
-    /// Time spent settling the pile with physics (zero for the height-field drop).
+    /// Time spent posing and settling the pile with physics (zero for the height-field drop).
     pub physics_time: std::time::Duration,
 }
 
