@@ -92,15 +92,7 @@ fn preset_with(preset: &str, size: u32, randomize: &str) -> Result<crate::render
 
 /// The `--randomize` flag: `none`, `all`, or a comma list of group names.
 pub fn parse_randomize(list: &str) -> Result<Randomize> {
-    let mut r = Randomize::default();
-    for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-        match name {
-            "none" => r = Randomize::default(),
-            "all" => r = Randomize::ALL,
-            g => r = r.with(g, true).context("--randomize")?,
-        }
-    }
-    Ok(r)
+    Randomize::parse_list(list).context("--randomize")
 }
 
 /// `chicktrain render`: a rendered, auto-labelled dataset with a preview sheet.

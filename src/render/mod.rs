@@ -34,6 +34,7 @@ pub mod randomize;
 pub mod scene;
 pub mod screen;
 pub mod sensor;
+pub mod settle;
 pub mod skin;
 pub mod trace;
 pub mod variety;
@@ -62,6 +63,9 @@ pub const RENDERER_VERSION: &str = "chicktrain-render-1";
 pub struct Timings {
     /// Pose, skinning, pile drop, light/camera sampling.
     pub scene: Duration,
+    /// The part of `scene` spent posing the carcasses and settling them with physics
+    /// (physics group on; zero for the height-field drop, whose posing is in `scene` only).
+    pub physics: Duration,
     pub build: Duration,
     pub trace: Duration,
     /// Amodal raster + label statistics.
@@ -75,6 +79,7 @@ pub struct Timings {
 impl std::ops::AddAssign for Timings {
     fn add_assign(&mut self, o: Timings) {
         self.scene += o.scene;
+        self.physics += o.physics;
         self.build += o.build;
         self.trace += o.trace;
         self.labels += o.labels;
@@ -194,6 +199,7 @@ pub fn render_sample(
         placed: n,
         timings: Timings {
             scene: t_scene,
+            physics: sc.physics_time,
             build: tracer.build_time,
             trace: t_trace,
             labels: t_labels,
@@ -354,7 +360,7 @@ impl std::fmt::Display for BenchReport {
         write!(
             f,
             "{} images {}x{} on {} threads: {:.2} images/s concurrent, {:.2} images/s one at a \
-             time ({:.0} ms/image); per image: scene {:.1} ms, build {:.1} ms, trace {:.1} ms, \
+             time ({:.0} ms/image); per image: scene {:.1} ms (physics {:.1} ms), build {:.1} ms, trace {:.1} ms, \
              labels {:.1} ms, sensor {:.1} ms, encode {:.1} ms; {:.0} triangles",
             self.images,
             self.width,
@@ -364,6 +370,7 @@ impl std::fmt::Display for BenchReport {
             self.sequential_images_per_sec,
             ms(self.wall) / self.images.max(1) as f64,
             ms(self.mean.scene),
+            ms(self.mean.physics),
             ms(self.mean.build),
             ms(self.mean.trace),
             ms(self.mean.labels),
@@ -408,6 +415,7 @@ pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::R
     let n = images.max(1) as u32;
     let mean = Timings {
         scene: sum.scene / n,
+        physics: sum.physics / n,
         build: sum.build / n,
         trace: sum.trace / n,
         labels: sum.labels / n,

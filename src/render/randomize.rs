@@ -74,6 +74,18 @@ impl Randomize {
         *slot = on;
         Ok(self)
     }
+
+    /// Groups from a command line: `none`, `all`, or comma-separated group names (each
+    /// turned on); an unknown name is an error listing the groups.
+    pub fn parse_list(list: &str) -> anyhow::Result<Randomize> {
+        match list.trim() {
+            "" | "none" => Ok(Randomize::default()),
+            "all" => Ok(Randomize::ALL),
+            names => names
+                .split(',')
+                .try_fold(Randomize::default(), |r, n| r.with(n.trim(), true)),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -92,5 +104,10 @@ mod tests {
         assert!(!off.lighting && off.camera && !off.is_off());
         let e = r.with("colour", true).unwrap_err().to_string();
         assert!(e.contains("colour") && e.contains("physics"), "{e}");
+        assert_eq!(Randomize::parse_list("none").unwrap(), Randomize::default());
+        assert_eq!(Randomize::parse_list("all").unwrap(), Randomize::ALL);
+        let two = Randomize::parse_list("physics, camera").unwrap();
+        assert!(two.physics && two.camera && !two.lighting);
+        assert!(Randomize::parse_list("physics,wind").is_err());
     }
 }

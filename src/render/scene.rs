@@ -20,6 +20,7 @@ use super::mesh::Mesh;
 use super::pile::{self, HeightField, RestingMode};
 use super::preset::RenderOptions;
 use super::sensor::Sensor;
+use super::settle;
 use super::skin::{pose_mesh, Pose};
 use super::trace::{Geometry, Look};
 use super::variety::Variety;
@@ -96,6 +97,8 @@ pub struct Scene {
     pub resting: Vec<RestingMode>,
     pub density: f32,
     pub jpeg_quality: u8,
+    /// Time spent posing and settling the pile with physics (zero for the height-field drop).
+    pub physics_time: std::time::Duration,
 }
 
 fn uni<R: Rng>(rng: &mut R, r: [f32; 2]) -> f32 {
@@ -144,7 +147,13 @@ pub fn sample<R: Rng>(
             plan.variety = Some(Variety::sample(&mut r, asset, user, &mut plan.pose, skin));
         }
     }
-    let (geo, resting) = build_pile(asset, &layout, plans);
+    // The physics group settles the pile with rigid-body contact; its draws come from its
+    // own stream, so the main stream (and every choice after this) is unchanged.
+    let physics = opts
+        .randomize
+        .physics
+        .then(|| (streams.rng(opts, "physics"), opts.resting_weights));
+    let (geo, resting, physics_time) = build_pile(asset, &layout, plans, physics);
     let lighting = Lighting::sample(rng, opts, view.look_at);
     let background = Background::sample(
         rng,
@@ -175,6 +184,7 @@ pub fn sample<R: Rng>(
         resting,
         density,
         jpeg_quality,
+        physics_time,
     }
 }
 
@@ -289,15 +299,16 @@ fn plan_carcasses<R: Rng>(
 }
 
 /// Skins and orients every carcass in parallel (pure, so the result does not depend on
-/// scheduling), then drops them one by one onto the height field, in plan order.
+/// scheduling), then drops them one by one onto the height field, in plan order. With
+/// `physics` (the physics stream and the resting-mode weights) the pile is instead dropped
+/// and settled by rigid-body physics (`settle.rs`); a pile it cannot simulate (a mesh
+/// without volume) falls back to the height field. Returns the time spent in physics.
 fn build_pile(
     asset: &Asset,
     layout: &PileLayout,
     plans: Vec<CarcassPlan>,
-) -> (Geometry, Vec<RestingMode>) {
-    // The map only needs to cover where carcasses can land: the candidate disc plus a
-    // carcass length (keeps it small for wide views).
-    let mut hf = HeightField::around(layout.centre, layout.radius + 0.45, 0.004);
+    physics: Option<(rand_chacha::ChaCha8Rng, [f32; 3])>,
+) -> (Geometry, Vec<RestingMode>, std::time::Duration) {
     let mut geo = Geometry::default();
     let mut resting = Vec::with_capacity(plans.len());
     // Each carcass's own mesh (its family's, cut and torn) when the carcass group is on.
@@ -308,6 +319,51 @@ fn build_pile(
             None => Cow::Borrowed(asset),
         })
         .collect();
+    let push = |geo: &mut Geometry, inst: usize, body: &Asset, placed: Vec<Vec3>, nor| {
+        let base = geo.positions.len() as u32;
+        geo.positions.extend(placed);
+        geo.normals.extend(nor);
+        geo.rest.extend_from_slice(&body.mesh.positions);
+        geo.redness.extend_from_slice(&body.redness);
+        for t in body.mesh.indices.chunks_exact(3) {
+            geo.triangles.push([t[0] + base, t[1] + base, t[2] + base]);
+            geo.tri_instance.push(inst as u16);
+        }
+    };
+    if let Some((mut rng, weights)) = physics {
+        let t0 = std::time::Instant::now();
+        let posed: Vec<(Vec<Vec3>, Vec<Vec3>)> = plans
+            .par_iter()
+            .zip(&bodies)
+            .map(|(plan, body)| pose_mesh(&body.mesh, &plan.pose))
+            .collect();
+        // Hull parts follow each carcass's own mesh (families and cuts change it).
+        let parts: Vec<Vec<u16>> = bodies
+            .iter()
+            .map(|b| settle::vertex_parts(&b.mesh))
+            .collect();
+        let parts: Vec<&[u16]> = parts.iter().map(|p| p.as_slice()).collect();
+        let pile = settle::drop_pile(
+            &mut rng,
+            weights,
+            layout.centre,
+            layout.radius,
+            &posed,
+            &parts,
+        );
+        if let Ok(pile) = pile {
+            for (inst, ((placed, nor, mode), body)) in
+                pile.carcasses.into_iter().zip(&bodies).enumerate()
+            {
+                push(&mut geo, inst, body, placed, nor);
+                resting.push(mode);
+            }
+            return (geo, resting, t0.elapsed());
+        }
+    }
+    // The map only needs to cover where carcasses can land: the candidate disc plus a
+    // carcass length (keeps it small for wide views).
+    let mut hf = HeightField::around(layout.centre, layout.radius + 0.45, 0.004);
     let posed: Vec<(Vec<Vec3>, Vec<Vec3>)> = plans
         .par_iter()
         .zip(&bodies)
@@ -320,18 +376,10 @@ fn build_pile(
         posed.into_iter().zip(&plans).zip(&bodies).enumerate()
     {
         let placed = pile::drop_one(&mut hf, &local, &mut nor, &plan.candidates);
-        let base = geo.positions.len() as u32;
-        geo.positions.extend(placed);
-        geo.normals.extend(nor);
-        geo.rest.extend_from_slice(&body.mesh.positions);
-        geo.redness.extend_from_slice(&body.redness);
-        for t in body.mesh.indices.chunks_exact(3) {
-            geo.triangles.push([t[0] + base, t[1] + base, t[2] + base]);
-            geo.tri_instance.push(inst as u16);
-        }
+        push(&mut geo, inst, body, placed, nor);
         resting.push(plan.mode);
     }
-    (geo, resting)
+    (geo, resting, std::time::Duration::ZERO)
 }
 
 /// The key light, the room it sits in, and its colour (the sensor's white balance
