@@ -57,6 +57,12 @@ pub struct Sensor {
     /// Shot-noise and read-noise standard deviations (linear, at signal 1).
     pub shot: f32,
     pub read: f32,
+    /// Share of the noise common to all three channels (0 = independent per channel,
+    /// pure colour noise, the base look; 1 = grey noise only).
+    pub mono_noise: f32,
+    /// Motion blur: the image-space displacement (pixels) during the exposure, a box
+    /// filter along it; zero = none. Masks stay the sharp object footprint.
+    pub motion: [f32; 2],
     pub seed: u64,
 }
 
@@ -114,6 +120,9 @@ impl Sensor {
         };
         let gain = self.target / median.max(1e-6) * 2f32.powf(self.exposure_ev);
         let mut buf: Vec<Vec3> = linear.iter().map(|c| *c * gain * self.wb).collect();
+        if self.motion[0].hypot(self.motion[1]) > 0.5 {
+            buf = motion_blur(&buf, wu, hu, self.motion);
+        }
         if self.blur > 0.05 {
             let k = gaussian_kernel(self.blur);
             let mut tmp = vec![Vec3::ZERO; buf.len()];
@@ -132,12 +141,19 @@ impl Sensor {
             let mut c = buf[i] * v;
             // Noise: near-Gaussian per channel as the sum of four 16-bit uniforms from one
             // hash (Irwin-Hall, variance 1/3, rescaled): no ln/cos per pixel.
-            for ch in 0..3 {
+            let gauss = |ch: u64| {
                 let hsh = hash(self.seed, i as u64, ch, 0x5E45);
                 let sum: f32 = (0..4)
                     .map(|k| ((hsh >> (16 * k)) & 0xFFFF) as f32 / 65535.0)
                     .sum();
-                let g = (sum - 2.0) * 3f32.sqrt();
+                (sum - 2.0) * 3f32.sqrt()
+            };
+            let shared = if self.mono_noise > 0.0 { gauss(3) } else { 0.0 };
+            for ch in 0..3 {
+                let mut g = gauss(ch);
+                if self.mono_noise > 0.0 {
+                    g = g * (1.0 - self.mono_noise).sqrt() + shared * self.mono_noise.sqrt();
+                }
                 let s = (self.shot * self.shot * c[ch as usize].max(0.0) + self.read * self.read)
                     .sqrt();
                 c[ch as usize] += g * s;
@@ -150,6 +166,34 @@ impl Sensor {
         });
         img
     }
+}
+
+/// Box filter along the displacement `m` (pixels), taps one pixel apart, bilinear.
+fn motion_blur(src: &[Vec3], w: usize, h: usize, m: [f32; 2]) -> Vec<Vec3> {
+    let len = m[0].hypot(m[1]);
+    let taps = len.ceil() as usize + 1;
+    let mut out = vec![Vec3::ZERO; src.len()];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, o) in row.iter_mut().enumerate() {
+            let mut s = Vec3::ZERO;
+            for t in 0..taps {
+                let f = t as f32 / (taps - 1) as f32 - 0.5;
+                let (sx, sy) = (x as f32 + m[0] * f, y as f32 + m[1] * f);
+                let (x0, y0) = (sx.floor(), sy.floor());
+                let (tx, ty) = (sx - x0, sy - y0);
+                let at = |xx: f32, yy: f32| {
+                    let xi = (xx as isize).clamp(0, w as isize - 1) as usize;
+                    let yi = (yy as isize).clamp(0, h as isize - 1) as usize;
+                    src[yi * w + xi]
+                };
+                let top = at(x0, y0).lerp(at(x0 + 1.0, y0), tx);
+                let bot = at(x0, y0 + 1.0).lerp(at(x0 + 1.0, y0 + 1.0), tx);
+                s += top.lerp(bot, ty);
+            }
+            *o = s / taps as f32;
+        }
+    });
+    out
 }
 
 /// JPEG bytes at `quality` (1-100).
@@ -179,6 +223,8 @@ mod tests {
             blur: 0.7,
             shot: 0.02,
             read: 0.004,
+            mono_noise: 0.0,
+            motion: [0.0; 2],
             seed: 9,
         };
         let buf: Vec<Vec3> = (0..64 * 64)
