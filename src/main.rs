@@ -152,6 +152,11 @@ enum Command {
         /// A carcass mesh (.glb, skinned or rigid) instead of the embedded one.
         #[arg(long)]
         carcass: Option<PathBuf>,
+        /// Randomisation groups: `all`, `none`, a list (`scene,lighting`) or `all,-camera`
+        /// (groups: carcass, scene, distractors, lighting, camera, physics). Default: all
+        /// for `synthetic` (what training renders), none for `proxy-real`.
+        #[arg(long)]
+        randomize: Option<String>,
     },
     /// Measure speed: `bench models` (model variants × sizes), `bench ablation` (what the
     /// scene needs), `bench coco` (the COCO evaluator), `bench render` (the renderer).
@@ -344,6 +349,11 @@ enum BenchWhat {
         preset: String,
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Randomisation groups: `all`, `none`, a list (`scene,lighting`) or `all,-camera`
+        /// (groups: carcass, scene, distractors, lighting, camera, physics). Default: all
+        /// for `synthetic` (what training renders), none for `proxy-real`.
+        #[arg(long)]
+        randomize: Option<String>,
     },
     /// Time load + evaluate + accumulate (bbox and segm) on a GT/DT pair.
     Coco {
@@ -384,7 +394,8 @@ impl BenchWhat {
                 images,
                 preset,
                 seed,
-            } => data::bench_render(size, images, &preset, seed),
+                randomize,
+            } => data::bench_render(size, images, &preset, seed, randomize.as_deref()),
             BenchWhat::Models {
                 variants,
                 sizes,
@@ -506,7 +517,16 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             size,
             preset,
             carcass,
-        }) => data::render(&out, count, seed, size, &preset, carcass),
+            randomize,
+        }) => data::render(
+            &out,
+            count,
+            seed,
+            size,
+            &preset,
+            carcass,
+            randomize.as_deref(),
+        ),
         Some(Command::Bench { what }) => what.run(),
         Some(Command::CocoEval {
             gt,
