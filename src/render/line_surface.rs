@@ -129,7 +129,7 @@ fn blob<R: Rng>(rng: &mut R, extent: f32, radius: [f32; 2], blood: bool) -> Blob
         ),
         radius: rng.random_range(radius[0]..radius[1]),
         dir: Vec2::new(a.cos(), a.sin()),
-        stretch: rng.random_range(1.0..4.0),
+        stretch: rng.random_range(1.0..2.5),
         blood,
     }
 }
@@ -216,7 +216,7 @@ impl LineSurface {
             (0..rng.random_range(1..7))
                 .map(|_| {
                     let blood = rng.random_bool(0.6);
-                    blob(rng, ext, [0.01, 0.09], blood)
+                    blob(rng, ext, [0.01, 0.06], blood)
                 })
                 .collect()
         } else {

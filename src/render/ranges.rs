@@ -24,6 +24,9 @@ pub struct DomainRanges {
     pub p_cut: f32,
     /// distractors: number of non-carcass objects per image (inclusive range).
     pub distractors: [u32; 2],
+    /// lighting: probability that the key light hangs over the view (mirrored by steel
+    /// and wet surfaces: specular glare).
+    pub p_glare: f32,
     /// lighting: number of lights per image, key light included (inclusive range).
     pub lights: [u32; 2],
     /// lighting: colour temperature of each light (K).
@@ -65,7 +68,8 @@ impl Default for DomainRanges {
             p_smears: 0.45,
             p_cut: 0.25,
             distractors: [0, 4],
-            lights: [1, 4],
+            p_glare: 0.2,
+            lights: [1, 3],
             light_kelvin: [2700.0, 7500.0],
             exposure_ev: [-1.2, 1.0],
             white_balance_jitter: 0.15,
@@ -100,6 +104,7 @@ impl DomainRanges {
             ("ranges.p_smears", self.p_smears),
             ("ranges.p_cut", self.p_cut),
             ("ranges.p_motion_blur", self.p_motion_blur),
+            ("ranges.p_glare", self.p_glare),
         ] {
             ensure!(
                 (0.0..=1.0).contains(&p),

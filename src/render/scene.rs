@@ -163,7 +163,8 @@ pub fn sample<R: Rng>(
     let mut lighting = Lighting::sample(rng, opts, view.look_at);
     let mut fill = Vec::new();
     if groups.lighting {
-        lighting = Lighting::sample(&mut light_rng, &wide_lighting(opts), view.look_at);
+        let wide = wide_lighting(&mut light_rng, opts);
+        lighting = Lighting::sample(&mut light_rng, &wide, view.look_at);
         fill = fill_lights(&mut light_rng, opts, view.look_at, &lighting.light);
     }
     let mut background = Background::sample(
@@ -229,13 +230,15 @@ fn wide_camera(opts: &RenderOptions) -> RenderOptions {
 }
 
 /// The options with the `lighting` group's key-light ranges: from near, small and hard
-/// (sharp shadows, a mirror glare on the steel when it sits over the view) to large and
-/// far, any colour temperature of the range, dim to bright rooms.
-fn wide_lighting(opts: &RenderOptions) -> RenderOptions {
+/// (sharp shadows) to large and far, any colour temperature of the range, dim to bright
+/// rooms; with probability `ranges.p_glare` the key hangs over the view, so steel and
+/// wet surfaces mirror it (specular glare).
+fn wide_lighting<R: Rng>(rng: &mut R, opts: &RenderOptions) -> RenderOptions {
+    let glare = rng.random_bool(opts.ranges.p_glare as f64);
     RenderOptions {
         light_height: [0.6, 2.6],
         light_size: [0.03, 1.5],
-        light_offset: [0.0, 2.5],
+        light_offset: if glare { [0.0, 0.6] } else { [0.8, 2.5] },
         light_kelvin: opts.ranges.light_kelvin,
         ambient: [0.05, 0.8],
         ..opts.clone()
@@ -305,7 +308,10 @@ fn fill_lights<R: Rng>(
             };
             let h = rng.random_range(0.5..2.5);
             let a = rng.random_range(0.0..std::f32::consts::TAU);
-            let off = Vec2::new(a.cos(), a.sin()) * rng.random_range(0.0..2.0);
+            // Soft boxes stay out of the mirror view (the key's glare is drawn apart);
+            // point-like lamps may glint anywhere.
+            let span = if point_like { 0.0..2.0 } else { 0.7..2.5 };
+            let off = Vec2::new(a.cos(), a.sin()) * rng.random_range(span);
             let c = look_at + off;
             let la = rng.random_range(0.0..std::f32::consts::TAU);
             let aspect = rng.random_range(0.3..1.0);
@@ -336,6 +342,7 @@ fn widen_exposure<R: Rng>(rng: &mut R, opts: &RenderOptions, sensor: &mut Sensor
     let s = sample_sensor(rng, &wide, light_rgb);
     sensor.exposure_ev = s.exposure_ev;
     sensor.wb = s.wb;
+    sensor.highlight_guard = true;
 }
 
 /// The `camera` group's optics and sensor: lens distortion, motion blur along a belt
@@ -578,6 +585,7 @@ fn sample_sensor<R: Rng>(rng: &mut R, opts: &RenderOptions, light_rgb: Vec3) -> 
         read: uni(rng, opts.shot_noise) * 0.2,
         mono_noise: 0.0,
         motion: [0.0; 2],
+        highlight_guard: false,
         seed: rng.random(),
     }
 }

@@ -63,6 +63,11 @@ pub struct Sensor {
     /// Motion blur: the image-space displacement (pixels) during the exposure, a box
     /// filter along it; zero = none. Masks stay the sharp object footprint.
     pub motion: [f32; 2],
+    /// Highlight protection of the auto-exposure: the gain is capped so the 97th
+    /// percentile of luminance lands at or below 0.9 (before the exposure offset). Off in
+    /// the base look; the `lighting` group turns it on, since its dark surfaces and wide
+    /// exposure range would otherwise blow the carcasses out to white.
+    pub highlight_guard: bool,
     pub seed: u64,
 }
 
@@ -118,7 +123,13 @@ impl Sensor {
         } else {
             *sample.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
         };
-        let gain = self.target / median.max(1e-6) * 2f32.powf(self.exposure_ev);
+        let mut gain = self.target / median.max(1e-6);
+        if self.highlight_guard && !sample.is_empty() {
+            let k = (sample.len() * 97 / 100).min(sample.len() - 1);
+            let p97 = *sample.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+            gain = gain.min(0.9 / p97.max(1e-6));
+        }
+        let gain = gain * 2f32.powf(self.exposure_ev);
         let mut buf: Vec<Vec3> = linear.iter().map(|c| *c * gain * self.wb).collect();
         if self.motion[0].hypot(self.motion[1]) > 0.5 {
             buf = motion_blur(&buf, wu, hu, self.motion);
@@ -225,6 +236,7 @@ mod tests {
             read: 0.004,
             mono_noise: 0.0,
             motion: [0.0; 2],
+            highlight_guard: false,
             seed: 9,
         };
         let buf: Vec<Vec3> = (0..64 * 64)
