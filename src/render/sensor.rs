@@ -252,4 +252,52 @@ mod tests {
         let p = encode_png(&a).unwrap();
         assert_eq!(&p[1..4], b"PNG");
     }
+
+    #[test]
+    fn motion_blur_smears_along_its_direction_and_mono_noise_is_grey() {
+        let base = Sensor {
+            exposure_ev: 0.0,
+            target: 0.18,
+            wb: Vec3::ONE,
+            vignette: 0.0,
+            blur: 0.0,
+            shot: 0.0,
+            read: 0.0,
+            mono_noise: 0.0,
+            motion: [0.0; 2],
+            highlight_guard: false,
+            seed: 3,
+        };
+        // A bright dot on grey: horizontal motion spreads it along x, not along y.
+        let mut buf = vec![Vec3::splat(0.1); 32 * 32];
+        buf[16 * 32 + 16] = Vec3::splat(5.0);
+        let s = Sensor {
+            motion: [8.0, 0.0],
+            ..base.clone()
+        };
+        let img = s.develop(&buf, 32, 32);
+        let sharp = base.develop(&buf, 32, 32);
+        assert!(img.get_pixel(20, 16)[0] > sharp.get_pixel(20, 16)[0] + 10);
+        assert_eq!(img.get_pixel(16, 20), sharp.get_pixel(16, 20));
+        // Grey noise only: the three channels move together.
+        let flat = vec![Vec3::splat(0.2); 32 * 32];
+        let noisy = Sensor {
+            read: 0.05,
+            mono_noise: 1.0,
+            ..base.clone()
+        };
+        let img = noisy.develop(&flat, 32, 32);
+        let spread = |im: &RgbImage| {
+            im.pixels()
+                .map(|p| (p[0] as i32 - p[2] as i32).abs())
+                .max()
+                .unwrap()
+        };
+        assert!(spread(&img) <= 1, "mono noise is coloured");
+        let colour = Sensor {
+            mono_noise: 0.0,
+            ..noisy
+        };
+        assert!(spread(&colour.develop(&flat, 32, 32)) > 5);
+    }
 }
