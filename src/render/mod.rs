@@ -660,6 +660,13 @@ mod randomize_tests {
         let ds = CocoDataset::load(&dir.join("annotations.json")).unwrap();
         assert_eq!(ds.images.len(), 2);
         assert!(ds.annotations.is_empty());
+        // The render cache stores and reads back an image without instances.
+        let cache_dir = dir.join("cache");
+        std::fs::create_dir_all(&cache_dir).unwrap();
+        let first = cache::load_or_render(&o, 1, 0, Some(&cache_dir)).unwrap();
+        let again = cache::load_or_render(&o, 1, 0, Some(&cache_dir)).unwrap();
+        assert!(first.instances.is_empty() && again.instances.is_empty());
+        assert_eq!(first.ids, again.ids);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
