@@ -188,6 +188,9 @@ pub fn sample<R: Rng>(
     if groups.lighting {
         widen_exposure(&mut light_rng, opts, &mut sensor, lighting.light_rgb);
     }
+    // Dark belts, crates and wet films (scene) and the wide exposure range (lighting)
+    // would blow pale carcasses out under median auto-exposure: protect highlights.
+    sensor.highlight_guard = groups.scene || groups.lighting;
     let mut lens = None;
     if groups.camera {
         let (l, q) = widen_sensor(&mut cam_rng, opts, &mut sensor);
@@ -342,7 +345,6 @@ fn widen_exposure<R: Rng>(rng: &mut R, opts: &RenderOptions, sensor: &mut Sensor
     let s = sample_sensor(rng, &wide, light_rgb);
     sensor.exposure_ev = s.exposure_ev;
     sensor.wb = s.wb;
-    sensor.highlight_guard = true;
 }
 
 /// The `camera` group's optics and sensor: lens distortion, motion blur along a belt
