@@ -152,11 +152,6 @@ enum Command {
         /// A carcass mesh (.glb, skinned or rigid) instead of the embedded one.
         #[arg(long)]
         carcass: Option<PathBuf>,
-        /// Randomisation groups: `all`, `none`, a list (`scene,lighting`) or `all,-camera`
-        /// (groups: carcass, scene, distractors, lighting, camera, physics). Default: all
-        /// for `synthetic` (what training renders), none for `proxy-real`.
-        #[arg(long)]
-        randomize: Option<String>,
     },
     /// Measure speed: `bench models` (model variants × sizes), `bench ablation` (what the
     /// scene needs), `bench coco` (the COCO evaluator), `bench render` (the renderer).
@@ -349,11 +344,6 @@ enum BenchWhat {
         preset: String,
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        /// Randomisation groups: `all`, `none`, a list (`scene,lighting`) or `all,-camera`
-        /// (groups: carcass, scene, distractors, lighting, camera, physics). Default: all
-        /// for `synthetic` (what training renders), none for `proxy-real`.
-        #[arg(long)]
-        randomize: Option<String>,
     },
     /// Time load + evaluate + accumulate (bbox and segm) on a GT/DT pair.
     Coco {
@@ -394,8 +384,7 @@ impl BenchWhat {
                 images,
                 preset,
                 seed,
-                randomize,
-            } => data::bench_render(size, images, &preset, seed, randomize.as_deref()),
+            } => data::bench_render(size, images, &preset, seed),
             BenchWhat::Models {
                 variants,
                 sizes,
@@ -517,16 +506,7 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             size,
             preset,
             carcass,
-            randomize,
-        }) => data::render(
-            &out,
-            count,
-            seed,
-            size,
-            &preset,
-            carcass,
-            randomize.as_deref(),
-        ),
+        }) => data::render(&out, count, seed, size, &preset, carcass),
         Some(Command::Bench { what }) => what.run(),
         Some(Command::CocoEval {
             gt,

@@ -84,10 +84,8 @@ pub fn render(
     size: u32,
     preset: &str,
     carcass: Option<PathBuf>,
-    randomize: Option<&str>,
 ) -> Result<String> {
     let mut opts = crate::render::RenderOptions::preset(preset, size)?;
-    opts.randomize = randomize_for(&opts, randomize)?;
     opts.count = count;
     opts.seed = seed;
     opts.carcass = carcass;
@@ -104,29 +102,7 @@ pub fn render(
 }
 
 /// `chicktrain bench render`.
-pub fn bench_render(
-    size: u32,
-    images: usize,
-    preset: &str,
-    seed: u64,
-    randomize: Option<&str>,
-) -> Result<String> {
-    let mut opts = crate::render::RenderOptions::preset(preset, size)?;
-    opts.randomize = randomize_for(&opts, randomize)?;
+pub fn bench_render(size: u32, images: usize, preset: &str, seed: u64) -> Result<String> {
+    let opts = crate::render::RenderOptions::preset(preset, size)?;
     Ok(crate::render::bench_render(&opts, images, seed)?.to_string())
-}
-
-/// The `--randomize` groups of `render` / `bench render`: as given, or by default every
-/// group for the synthetic preset (what training renders) and none for proxy-real
-/// (which the loader never randomises).
-fn randomize_for(
-    opts: &crate::render::RenderOptions,
-    spec: Option<&str>,
-) -> Result<crate::render::randomize::Randomize> {
-    use crate::render::randomize::Randomize;
-    match spec {
-        Some(s) => Randomize::parse(s).with_context(|| format!("--randomize {s:?}")),
-        None if opts.is_proxy() => Ok(Randomize::default()),
-        None => Ok(Randomize::ALL),
-    }
 }

@@ -602,7 +602,10 @@ mod randomize_tests {
     fn groups(spec: &str, size: u32) -> RenderOptions {
         let mut o = RenderOptions::synthetic(size);
         o.carcasses = [3, 6];
-        o.randomize = Randomize::parse(spec).unwrap();
+        // `spec`: "none" or a comma list of groups.
+        for g in spec.split(',').filter(|g| *g != "none") {
+            o.randomize = o.randomize.with(g, true).unwrap();
+        }
         o
     }
 

@@ -74,22 +74,6 @@ impl Randomize {
         *slot = on;
         Ok(self)
     }
-
-    /// Parses a CLI list: `all`, `none`, or comma-separated group names that are switched
-    /// on (`scene,lighting`); entries starting with `-` switch a group off, so
-    /// `all,-lighting` is every group but lighting.
-    pub fn parse(spec: &str) -> anyhow::Result<Randomize> {
-        let mut r = Randomize::default();
-        for item in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-            r = match item {
-                "all" => Randomize::ALL,
-                "none" => Randomize::default(),
-                off if off.starts_with('-') => r.with(&off[1..], false)?,
-                on => r.with(on, true)?,
-            };
-        }
-        Ok(r)
-    }
 }
 
 #[cfg(test)]
@@ -108,14 +92,5 @@ mod tests {
         assert!(!off.lighting && off.camera && !off.is_off());
         let e = r.with("colour", true).unwrap_err().to_string();
         assert!(e.contains("colour") && e.contains("physics"), "{e}");
-        assert_eq!(Randomize::parse("all").unwrap(), Randomize::ALL);
-        assert!(Randomize::parse("none").unwrap().is_off());
-        let sl = Randomize::parse("scene, lighting").unwrap();
-        assert!(sl.scene && sl.lighting && !sl.camera && !sl.carcass);
-        assert_eq!(
-            Randomize::parse("all,-lighting").unwrap(),
-            Randomize::ALL.with("lighting", false).unwrap()
-        );
-        assert!(Randomize::parse("scene,sky").is_err());
     }
 }
