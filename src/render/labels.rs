@@ -67,7 +67,10 @@ pub fn amodal_masks(geo: &Geometry, cam: &Camera, n_instances: usize) -> Vec<Vec
     // rasterise instances in parallel (each owns its mask).
     let mut ranges = vec![(usize::MAX, 0usize); n_instances];
     for (t, &inst) in geo.tri_instance.iter().enumerate() {
-        let r = &mut ranges[inst as usize];
+        // Distractors (instance numbers from `distractor::PROP_BASE`) get no mask.
+        let Some(r) = ranges.get_mut(inst as usize) else {
+            continue;
+        };
         r.0 = r.0.min(t);
         r.1 = r.1.max(t + 1);
     }

@@ -293,6 +293,9 @@ pub enum Background {
         dir: Vec2,
         stains: Vec<Stain>,
     },
+    /// The `scene` randomisation group's surfaces (plates, belts, crates, generic; wet,
+    /// smeared), see [`super::line_surface`].
+    Line(Box<super::line_surface::LineSurface>),
 }
 
 impl Background {
@@ -364,6 +367,7 @@ impl Background {
     pub fn surface(&self, p: Vec3) -> Surface {
         let q = p.truncate();
         match self {
+            Background::Line(line) => line.surface(p),
             Background::Steel {
                 f0,
                 roughness,

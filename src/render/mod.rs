@@ -19,11 +19,14 @@
 pub mod cache;
 pub mod camera;
 pub mod carcass;
+pub mod distractor;
 pub mod export;
 pub mod family;
 pub mod glb;
 pub mod labels;
+pub mod lens;
 pub mod light;
+pub mod line_surface;
 pub mod material;
 pub mod mesh;
 pub mod noise;
@@ -31,6 +34,7 @@ pub mod parts;
 pub mod pile;
 pub mod preset;
 pub mod randomize;
+pub mod ranges;
 pub mod scene;
 pub mod screen;
 pub mod sensor;
@@ -162,6 +166,16 @@ pub fn render_sample(
     seed: u64,
     index: u64,
 ) -> anyhow::Result<RenderedSample> {
+    Ok(render_traced(opts, seed, index)?.0)
+}
+
+/// [`render_sample`], also returning the id buffer as traced (distractors still carry
+/// their own ids, after the lens warp) so tests can check where distractors were.
+fn render_traced(
+    opts: &RenderOptions,
+    seed: u64,
+    index: u64,
+) -> anyhow::Result<(RenderedSample, Vec<u16>)> {
     opts.validate()?;
     let asset = scene::asset(opts.carcass.as_ref())?;
     let t0 = Instant::now();
@@ -176,6 +190,18 @@ pub fn render_sample(
     let t2 = Instant::now();
     let n = sc.resting.len();
     let mut amodal = labels::amodal_masks(&sc.geometry, &sc.look.camera, n);
+    if let Some(lens) = &sc.lens {
+        let (w, h) = (opts.width as usize, opts.height as usize);
+        let f = &mut frame;
+        lens.warp(&mut f.radiance, &mut f.depth, &mut f.ids, &mut amodal, w, h);
+    }
+    // Distractors are never labelled: their pixels are background in the id buffer.
+    let traced_ids = frame.ids.clone();
+    for id in frame.ids.iter_mut() {
+        if distractor::is_prop_id(*id) {
+            *id = 0;
+        }
+    }
     let names: Vec<&str> = sc.resting.iter().map(|m| m.name()).collect();
     let instances = labels::instance_labels(
         &frame.ids,
@@ -190,7 +216,7 @@ pub fn render_sample(
     frame.darken_crevices(0.45);
     let image = sc.sensor.develop(&frame.radiance, opts.width, opts.height);
     let t_sensor = t3.elapsed();
-    Ok(RenderedSample {
+    let sample = RenderedSample {
         image,
         ids: frame.ids,
         instances,
@@ -206,7 +232,8 @@ pub fn render_sample(
             sensor: t_sensor,
             encode: Duration::ZERO,
         },
-    })
+    };
+    Ok((sample, traced_ids))
 }
 
 /// Encodes a sample's image in the dataset format; returns (bytes, file extension).
@@ -621,6 +648,158 @@ mod tests {
         let mut o = small(64);
         o.width = 0;
         assert!(render_sample(&o, 0, 0).is_err());
+    }
+}
+
+#[cfg(test)]
+mod randomize_tests {
+    use super::*;
+    use crate::annotations::coco::{CocoDataset, Segmentation};
+    use crate::annotations::rle::Rle;
+
+    fn groups(spec: &str, size: u32) -> RenderOptions {
+        let mut o = RenderOptions::synthetic(size);
+        o.carcasses = [3, 6];
+        // `spec`: "none" or a comma list of groups.
+        for g in spec.split(',').filter(|g| *g != "none") {
+            o.randomize = o.randomize.with(g, true).unwrap();
+        }
+        o
+    }
+
+    #[test]
+    fn groups_are_deterministic_and_draw_from_their_own_streams() {
+        let o = groups("scene,distractors,lighting,camera", 64);
+        // Same pixels, ids and labels on a one-thread pool (scheduling must not matter).
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        for i in 0..3 {
+            let a = render_sample(&o, 5, i).unwrap();
+            let b = one.install(|| render_sample(&o, 5, i)).unwrap();
+            assert!(a.image == b.image && a.ids == b.ids && a.instances == b.instances);
+        }
+        // Lighting changes shading only: with it off, the same geometry, camera, lens and
+        // labels (its stream is apart), but other pixels.
+        let no_light = groups("scene,distractors,camera", 64);
+        let mut differ = 0;
+        for i in 0..3 {
+            let (a, b) = (
+                render_sample(&o, 5, i).unwrap(),
+                render_sample(&no_light, 5, i).unwrap(),
+            );
+            assert_eq!(a.ids, b.ids, "image {i}");
+            assert_eq!(a.instances, b.instances);
+            differ += (a.image != b.image) as u32;
+        }
+        assert_eq!(differ, 3);
+        // And each group really changes the image against the base look.
+        let base = render_sample(&groups("none", 64), 5, 0).unwrap();
+        for g in ["scene", "distractors", "lighting", "camera"] {
+            let mut changed = 0;
+            let mut on = groups(g, 64);
+            // At least two objects per image (the default range starts at none).
+            on.ranges.distractors = [2, 4];
+            for i in 0..3 {
+                let a = render_sample(&on, 5, i).unwrap();
+                let b = render_sample(&groups("none", 64), 5, i).unwrap();
+                changed += (a.image != b.image) as u32;
+            }
+            assert!(changed >= 2, "group {g} changed {changed}/3 images");
+        }
+        assert!(!base.instances.is_empty());
+    }
+
+    #[test]
+    fn empty_scenes_have_no_instances_and_a_valid_coco_export() {
+        let mut o = groups("scene,distractors", 64);
+        o.ranges.p_empty = 1.0;
+        let s = render_sample(&o, 1, 0).unwrap();
+        assert!(s.instances.is_empty() && s.placed == 0);
+        assert!(s.ids.iter().all(|&v| v == 0));
+        let dir = std::env::temp_dir().join(format!("ct-empty-{}", std::process::id()));
+        o.count = 2;
+        render_dataset(&o, &dir, false).unwrap();
+        let ds = CocoDataset::load(&dir.join("annotations.json")).unwrap();
+        assert_eq!(ds.images.len(), 2);
+        assert!(ds.annotations.is_empty());
+        // The render cache stores and reads back an image without instances.
+        let cache_dir = dir.join("cache");
+        std::fs::create_dir_all(&cache_dir).unwrap();
+        let first = cache::load_or_render(&o, 1, 0, Some(&cache_dir)).unwrap();
+        let again = cache::load_or_render(&o, 1, 0, Some(&cache_dir)).unwrap();
+        assert!(first.instances.is_empty() && again.instances.is_empty());
+        assert_eq!(first.ids, again.ids);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn distractor_pixels_are_never_inside_a_carcass_mask() {
+        let mut o = groups("distractors", 96);
+        o.carcasses = [5, 8];
+        o.density = [0.6, 1.0];
+        o.ranges.distractors = [6, 8];
+        let (mut prop_px, mut occluded) = (0usize, 0usize);
+        for i in 0..4 {
+            let (s, traced) = render_traced(&o, 2, i).unwrap();
+            prop_px += traced
+                .iter()
+                .filter(|&&v| distractor::is_prop_id(v))
+                .count();
+            let anns = export::annotations(&s.ids, 96, 96, &s.instances, 1, 1);
+            for (inst, ann) in s.instances.iter().zip(&anns) {
+                let Segmentation::Rle { counts, .. } = &ann.segmentation else {
+                    panic!()
+                };
+                let m = Rle::from_compressed(counts, 96, 96).unwrap().decode();
+                for (p, &t) in traced.iter().enumerate() {
+                    assert!(
+                        !(distractor::is_prop_id(t) && m.data[p] != 0),
+                        "distractor pixel {p} inside the mask of instance {}",
+                        inst.id
+                    );
+                }
+                occluded += (inst.visible_px < inst.amodal_px) as usize;
+            }
+        }
+        assert!(prop_px > 50, "only {prop_px} distractor pixels in 4 images");
+        assert!(occluded > 0);
+    }
+
+    #[test]
+    fn several_lights_render_finite_values() {
+        let mut o = groups("lighting", 64);
+        o.ranges.lights = [4, 4];
+        let asset = scene::asset(None).unwrap();
+        for i in 0..3 {
+            let mut rng = image_rng(&o, 3, i);
+            let sc = scene::sample(&mut rng, &scene::Streams { seed: 3, index: i }, &o, &asset);
+            assert_eq!(sc.look.fill.len(), 3);
+            let tracer = trace::Tracer::build(&sc.geometry);
+            let f = tracer.render(&sc.geometry, &sc.look);
+            assert!(f
+                .radiance
+                .iter()
+                .all(|c| c.is_finite() && c.min_element() >= 0.0));
+            assert!(f.radiance.iter().map(|c| c.x + c.y + c.z).sum::<f32>() > 0.0);
+        }
+    }
+
+    #[test]
+    fn lens_distortion_keeps_masks_on_the_id_buffer() {
+        let mut o = groups("camera", 96);
+        o.ranges.lens_k1 = [-0.25, -0.25];
+        o.ranges.lens_k2 = [0.0, 0.0];
+        let s = render_sample(&o, 4, 0).unwrap();
+        o.ranges.lens_k1 = [0.0, 0.0];
+        let flat = render_sample(&o, 4, 0).unwrap();
+        assert_ne!(s.ids, flat.ids, "the lens moved nothing");
+        for (inst, m) in s.instances.iter().zip(s.masks()) {
+            let n = m.data.iter().filter(|&&v| v != 0).count() as u64;
+            assert_eq!(n, inst.visible_px);
+            assert!(inst.visible_px <= inst.amodal_px);
+        }
     }
 }
 

@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use super::labels::LabelThresholds;
 use super::randomize::Randomize;
+use super::ranges::DomainRanges;
 use super::skin::PoseRanges;
 
 /// Image file format of rendered datasets.
@@ -91,6 +92,10 @@ pub struct RenderOptions {
     /// base look, and is left out of the serialised options (and so of cache keys).
     #[serde(default, skip_serializing_if = "Randomize::is_off")]
     pub randomize: Randomize,
+    /// Ranges the `scene`, `distractors`, `lighting` and `camera` groups draw from when
+    /// on (see [`DomainRanges`]); left out of the serialised options while default.
+    #[serde(default, skip_serializing_if = "DomainRanges::is_default")]
+    pub ranges: DomainRanges,
 }
 
 impl RenderOptions {
@@ -134,6 +139,7 @@ impl RenderOptions {
             raster_primary: true,
             labels: LabelThresholds::default(),
             randomize: Randomize::default(),
+            ranges: DomainRanges::default(),
         }
     }
 
@@ -292,6 +298,7 @@ impl RenderOptions {
             self.white_balance_jitter >= 0.0 && self.white_balance_jitter < 0.5,
             "white_balance_jitter must be in [0, 0.5)"
         );
+        self.ranges.validate()?;
         Ok(())
     }
 }

@@ -14,7 +14,10 @@ use rayon::prelude::*;
 
 use super::camera::Camera;
 use super::carcass;
+use super::distractor;
+use super::lens::Lens;
 use super::light::{kelvin_to_rgb, AreaLight, Environment};
+use super::line_surface::LineSurface;
 use super::material::{Background, SkinMaterial};
 use super::mesh::Mesh;
 use super::pile::{self, HeightField, RestingMode};
@@ -99,6 +102,8 @@ pub struct Scene {
     pub jpeg_quality: u8,
     /// Time spent posing and settling the pile with physics (zero for the height-field drop).
     pub physics_time: std::time::Duration,
+    /// Radial distortion applied to the traced frame (the `camera` group); None = pinhole.
+    pub lens: Option<Lens>,
 }
 
 fn uni<R: Rng>(rng: &mut R, r: [f32; 2]) -> f32 {
@@ -128,18 +133,39 @@ impl Streams {
 /// Samples a scene. `rng` is the image's own stream; the helpers below draw from it in
 /// this order: count and density, camera, pile layout, each carcass's plan, light and
 /// room, plate, sensor, JPEG quality, render seed. Changing that order changes every image.
+///
+/// The randomisation groups (`opts.randomize`) draw from their own streams and replace
+/// or add to those choices after the main stream's draws, which all still happen: a group
+/// switched on or off never shifts the main stream or another group.
 pub fn sample<R: Rng>(
     rng: &mut R,
     streams: &Streams,
     opts: &RenderOptions,
     asset: &Asset,
 ) -> Scene {
+    let groups = opts.randomize;
+    let mut scene_rng = streams.rng(opts, "scene");
+    let mut cam_rng = streams.rng(opts, "camera");
+    let mut light_rng = streams.rng(opts, "lighting");
     let n = rng.random_range(opts.carcasses[0]..=opts.carcasses[1].max(opts.carcasses[0])) as usize;
     let density = uni(rng, opts.density);
-    let view = View::sample(rng, opts);
-    let layout = PileLayout::sample(rng, opts, &view, n, density);
+    let mut view = View::sample(rng, opts);
+    if groups.camera {
+        view = View::sample(&mut cam_rng, &wide_camera(opts));
+    }
+    let empty = groups.scene && scene_rng.random_bool(opts.ranges.p_empty as f64);
+    let mut layout = PileLayout::sample(rng, opts, &view, n, density);
+    if groups.scene {
+        cut_by_frame(&mut scene_rng, opts, &mut layout, &view);
+    }
     let (mut plans, mut skins) = plan_carcasses(rng, opts, &layout, n);
-    if opts.randomize.carcass {
+    if empty {
+        // A pure negative: the carcasses were planned (the main stream stays aligned)
+        // but none is placed.
+        plans.clear();
+        skins.clear();
+    }
+    if groups.carcass {
         let mut stream = streams.rng(opts, "carcass");
         for (plan, skin) in plans.iter_mut().zip(&mut skins) {
             let mut r = Variety::instance_rng(&mut stream);
@@ -149,28 +175,60 @@ pub fn sample<R: Rng>(
     }
     // The physics group settles the pile with rigid-body contact; its draws come from its
     // own stream, so the main stream (and every choice after this) is unchanged.
-    let physics = opts
-        .randomize
+    let physics = groups
         .physics
         .then(|| (streams.rng(opts, "physics"), opts.resting_weights));
-    let (geo, resting, physics_time) = build_pile(asset, &layout, plans, physics);
-    let lighting = Lighting::sample(rng, opts, view.look_at);
-    let background = Background::sample(
+    let (mut geo, resting, physics_time) = build_pile(asset, &layout, plans, physics);
+    let props = if groups.distractors {
+        add_distractors(streams, opts, &mut geo, &layout, &view)
+    } else {
+        Vec::new()
+    };
+    let mut lighting = Lighting::sample(rng, opts, view.look_at);
+    let mut fill = Vec::new();
+    if groups.lighting {
+        let wide = wide_lighting(&mut light_rng, opts);
+        lighting = Lighting::sample(&mut light_rng, &wide, view.look_at);
+        fill = fill_lights(&mut light_rng, opts, view.look_at, &lighting.light);
+    }
+    let mut background = Background::sample(
         rng,
         opts.p_belt,
         opts.p_stains,
         opts.steel_roughness,
         view.half_view * 1.5,
     );
-    let sensor = sample_sensor(rng, opts, lighting.light_rgb);
+    if groups.scene {
+        background = Background::Line(Box::new(LineSurface::sample(
+            &mut scene_rng,
+            &opts.ranges,
+            view.look_at,
+            view.half_view * 1.2,
+        )));
+    }
+    let mut sensor = sample_sensor(rng, opts, lighting.light_rgb);
     let q = opts.jpeg_quality;
-    let jpeg_quality = rng.random_range(q[0].min(q[1])..=q[1].max(q[0]));
+    let mut jpeg_quality = rng.random_range(q[0].min(q[1])..=q[1].max(q[0]));
+    if groups.lighting {
+        widen_exposure(&mut light_rng, opts, &mut sensor, lighting.light_rgb);
+    }
+    // Dark belts, crates and wet films (scene) and the wide exposure range (lighting)
+    // would blow pale carcasses out under median auto-exposure: protect highlights.
+    sensor.highlight_guard = groups.scene || groups.lighting;
+    let mut lens = None;
+    if groups.camera {
+        let (l, q) = widen_sensor(&mut cam_rng, opts, &mut sensor);
+        lens = Some(l);
+        jpeg_quality = q;
+    }
     let look = Look {
         camera: view.camera,
         light: lighting.light,
+        fill,
         env: lighting.env,
         background,
         skins,
+        props,
         shadow_samples: opts.shadow_samples,
         shadow_filter: opts.shadow_filter_px as usize,
         raster_primary: opts.raster_primary,
@@ -185,7 +243,157 @@ pub fn sample<R: Rng>(
         density,
         jpeg_quality,
         physics_time,
+        lens,
     }
+}
+
+/// The options with the `camera` group's height, field of view and tilt ranges.
+fn wide_camera(opts: &RenderOptions) -> RenderOptions {
+    RenderOptions {
+        camera_height: opts.ranges.camera_height,
+        fov_deg: opts.ranges.fov_deg,
+        tilt_max_deg: opts.ranges.tilt_max_deg,
+        ..opts.clone()
+    }
+}
+
+/// The options with the `lighting` group's key-light ranges: from near, small and hard
+/// (sharp shadows) to large and far, any colour temperature of the range, dim to bright
+/// rooms; with probability `ranges.p_glare` the key hangs over the view, so steel and
+/// wet surfaces mirror it (specular glare).
+fn wide_lighting<R: Rng>(rng: &mut R, opts: &RenderOptions) -> RenderOptions {
+    let glare = rng.random_bool(opts.ranges.p_glare as f64);
+    RenderOptions {
+        light_height: [0.6, 2.6],
+        light_size: [0.03, 1.5],
+        light_offset: if glare { [0.0, 0.6] } else { [0.8, 2.5] },
+        light_kelvin: opts.ranges.light_kelvin,
+        ambient: [0.05, 0.8],
+        ..opts.clone()
+    }
+}
+
+/// The `scene` group's framing: with probability `ranges.p_cut` the pile is pushed
+/// towards the border and spread wider, so carcasses are cut by the frame.
+fn cut_by_frame<R: Rng>(rng: &mut R, opts: &RenderOptions, layout: &mut PileLayout, view: &View) {
+    if !rng.random_bool(opts.ranges.p_cut as f64) {
+        return;
+    }
+    let a = rng.random_range(0.0..std::f32::consts::TAU);
+    let d = rng.random_range(0.5..1.05) * view.half_view;
+    layout.centre = view.look_at + Vec2::new(a.cos(), a.sin()) * d;
+    layout.radius = (layout.radius * rng.random_range(1.0..1.6)).min(view.half_view * 1.4);
+}
+
+/// The `distractors` group: `ranges.distractors` objects on and around the pile.
+fn add_distractors(
+    streams: &Streams,
+    opts: &RenderOptions,
+    geo: &mut Geometry,
+    layout: &PileLayout,
+    view: &View,
+) -> Vec<distractor::PropMaterial> {
+    let mut rng = streams.rng(opts, "distractors");
+    let r = opts.ranges.distractors;
+    let count = rng.random_range(r[0]..=r[1].max(r[0])) as usize;
+    let area = distractor::Area {
+        pile_centre: layout.centre,
+        pile_radius: layout.radius,
+        view_centre: view.look_at,
+        half_view: view.half_view,
+    };
+    distractor::place(&mut rng, geo, &area, count)
+}
+
+/// The `lighting` group's further lights (`ranges.lights` in all, the key included):
+/// soft boxes of several sizes and near point-like lamps, each with its own colour
+/// temperature and a strength relative to the key light at the view centre.
+fn fill_lights<R: Rng>(
+    rng: &mut R,
+    opts: &RenderOptions,
+    look_at: Vec2,
+    key: &AreaLight,
+) -> Vec<AreaLight> {
+    let r = opts.ranges.lights;
+    let count = rng.random_range(r[0]..=r[1].max(r[0])) as usize - 1;
+    let target = look_at.extend(0.0);
+    // Irradiance a light of unit-luminance colour gives at the view centre, per unit of
+    // its `color` (cosine at the light, inverse square).
+    let reach = |l: &AreaLight| {
+        let d = l.centre - target;
+        let d2 = d.length_squared().max(1e-4);
+        l.area() * (d.z / d2.sqrt()).max(0.05) / d2
+    };
+    let lum = Vec3::new(0.2126, 0.7152, 0.0722);
+    let key_e = key.color.dot(lum) * reach(key);
+    (0..count)
+        .map(|_| {
+            let point_like = rng.random_bool(0.4);
+            let size = if point_like {
+                rng.random_range(0.01..0.06)
+            } else {
+                rng.random_range(0.15..1.2)
+            };
+            let h = rng.random_range(0.5..2.5);
+            let a = rng.random_range(0.0..std::f32::consts::TAU);
+            // Soft boxes stay out of the mirror view (the key's glare is drawn apart);
+            // point-like lamps may glint anywhere.
+            let span = if point_like { 0.0..2.0 } else { 0.7..2.5 };
+            let off = Vec2::new(a.cos(), a.sin()) * rng.random_range(span);
+            let c = look_at + off;
+            let la = rng.random_range(0.0..std::f32::consts::TAU);
+            let aspect = rng.random_range(0.3..1.0);
+            let u = Vec3::new(la.cos(), la.sin(), 0.0) * size * 0.5;
+            let v = Vec3::new(-la.sin(), la.cos(), 0.0) * size * 0.5 * aspect;
+            let rgb = kelvin_to_rgb(uni(rng, opts.ranges.light_kelvin));
+            let strength = rng.random_range(0.1..0.9);
+            let mut l = AreaLight {
+                centre: Vec3::new(c.x, c.y, h),
+                u,
+                v,
+                color: rgb,
+            };
+            l.color = rgb * (strength * key_e / reach(&l));
+            l
+        })
+        .collect()
+}
+
+/// The `lighting` group's exposure and white-balance ranges (wider than the base).
+fn widen_exposure<R: Rng>(rng: &mut R, opts: &RenderOptions, sensor: &mut Sensor, light_rgb: Vec3) {
+    let wide = RenderOptions {
+        white_balance_jitter: opts.ranges.white_balance_jitter,
+        white_balance_correction: [0.5, 1.0],
+        exposure_ev: opts.ranges.exposure_ev,
+        ..opts.clone()
+    };
+    let s = sample_sensor(rng, &wide, light_rgb);
+    sensor.exposure_ev = s.exposure_ev;
+    sensor.wb = s.wb;
+}
+
+/// The `camera` group's optics and sensor: lens distortion, motion blur along a belt
+/// direction, shot / read / colour noise, JPEG quality. Returns the lens and the quality.
+fn widen_sensor<R: Rng>(rng: &mut R, opts: &RenderOptions, sensor: &mut Sensor) -> (Lens, u8) {
+    let r = &opts.ranges;
+    let lens = Lens {
+        k1: uni(rng, r.lens_k1),
+        k2: uni(rng, r.lens_k2),
+    };
+    sensor.motion = if rng.random_bool(r.p_motion_blur as f64) {
+        let a = rng.random_range(0.0..std::f32::consts::TAU);
+        let len = uni(rng, r.motion_blur_px) * opts.width as f32 / 640.0;
+        [a.cos() * len, a.sin() * len]
+    } else {
+        [0.0; 2]
+    };
+    sensor.shot = uni(rng, r.shot_noise);
+    sensor.read = uni(rng, r.read_noise);
+    sensor.mono_noise = 1.0 - uni(rng, r.colour_noise);
+    sensor.vignette = uni(rng, [0.0, 0.5]);
+    sensor.blur = uni(rng, [0.2, 1.4]);
+    let q = r.jpeg_quality;
+    (lens, rng.random_range(q[0]..=q[1].max(q[0])))
 }
 
 /// The camera and what it sees of the plate: the pile and the light are placed relative
@@ -454,6 +662,9 @@ fn sample_sensor<R: Rng>(rng: &mut R, opts: &RenderOptions, light_rgb: Vec3) -> 
         blur: uni(rng, opts.blur_px),
         shot: uni(rng, opts.shot_noise),
         read: uni(rng, opts.shot_noise) * 0.2,
+        mono_noise: 0.0,
+        motion: [0.0; 2],
+        highlight_guard: false,
         seed: rng.random(),
     }
 }

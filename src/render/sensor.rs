@@ -57,6 +57,18 @@ pub struct Sensor {
     /// Shot-noise and read-noise standard deviations (linear, at signal 1).
     pub shot: f32,
     pub read: f32,
+    /// Share of the noise common to all three channels (0 = independent per channel,
+    /// pure colour noise, the base look; 1 = grey noise only).
+    pub mono_noise: f32,
+    /// Motion blur: the image-space displacement (pixels) during the exposure, a box
+    /// filter along it; zero = none. Masks stay the sharp object footprint.
+    pub motion: [f32; 2],
+    /// Highlight protection of the auto-exposure: the gain is capped so the 90th
+    /// percentile of luminance lands at or below 0.8 (before the exposure offset), by at
+    /// most 1.3 stops. Off in
+    /// the base look; the `scene` and `lighting` groups turn it on, since their dark
+    /// surfaces and wide exposure range would otherwise blow the carcasses out to white.
+    pub highlight_guard: bool,
     pub seed: u64,
 }
 
@@ -112,8 +124,20 @@ impl Sensor {
         } else {
             *sample.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
         };
-        let gain = self.target / median.max(1e-6) * 2f32.powf(self.exposure_ev);
+        let mut gain = self.target / median.max(1e-6);
+        if self.highlight_guard && !sample.is_empty() {
+            // The 90th percentile, not the maximum: a lamp mirrored in the steel may clip
+            // (as in a real camera) without darkening the whole image; and at most 1.3
+            // stops below the median exposure.
+            let k = (sample.len() * 9 / 10).min(sample.len() - 1);
+            let p90 = *sample.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+            gain = gain.min(0.8 / p90.max(1e-6)).max(gain * 0.4);
+        }
+        let gain = gain * 2f32.powf(self.exposure_ev);
         let mut buf: Vec<Vec3> = linear.iter().map(|c| *c * gain * self.wb).collect();
+        if self.motion[0].hypot(self.motion[1]) > 0.5 {
+            buf = motion_blur(&buf, wu, hu, self.motion);
+        }
         if self.blur > 0.05 {
             let k = gaussian_kernel(self.blur);
             let mut tmp = vec![Vec3::ZERO; buf.len()];
@@ -132,12 +156,19 @@ impl Sensor {
             let mut c = buf[i] * v;
             // Noise: near-Gaussian per channel as the sum of four 16-bit uniforms from one
             // hash (Irwin-Hall, variance 1/3, rescaled): no ln/cos per pixel.
-            for ch in 0..3 {
+            let gauss = |ch: u64| {
                 let hsh = hash(self.seed, i as u64, ch, 0x5E45);
                 let sum: f32 = (0..4)
                     .map(|k| ((hsh >> (16 * k)) & 0xFFFF) as f32 / 65535.0)
                     .sum();
-                let g = (sum - 2.0) * 3f32.sqrt();
+                (sum - 2.0) * 3f32.sqrt()
+            };
+            let shared = if self.mono_noise > 0.0 { gauss(3) } else { 0.0 };
+            for ch in 0..3 {
+                let mut g = gauss(ch);
+                if self.mono_noise > 0.0 {
+                    g = g * (1.0 - self.mono_noise).sqrt() + shared * self.mono_noise.sqrt();
+                }
                 let s = (self.shot * self.shot * c[ch as usize].max(0.0) + self.read * self.read)
                     .sqrt();
                 c[ch as usize] += g * s;
@@ -150,6 +181,34 @@ impl Sensor {
         });
         img
     }
+}
+
+/// Box filter along the displacement `m` (pixels), taps one pixel apart, bilinear.
+fn motion_blur(src: &[Vec3], w: usize, h: usize, m: [f32; 2]) -> Vec<Vec3> {
+    let len = m[0].hypot(m[1]);
+    let taps = len.ceil() as usize + 1;
+    let mut out = vec![Vec3::ZERO; src.len()];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, o) in row.iter_mut().enumerate() {
+            let mut s = Vec3::ZERO;
+            for t in 0..taps {
+                let f = t as f32 / (taps - 1) as f32 - 0.5;
+                let (sx, sy) = (x as f32 + m[0] * f, y as f32 + m[1] * f);
+                let (x0, y0) = (sx.floor(), sy.floor());
+                let (tx, ty) = (sx - x0, sy - y0);
+                let at = |xx: f32, yy: f32| {
+                    let xi = (xx as isize).clamp(0, w as isize - 1) as usize;
+                    let yi = (yy as isize).clamp(0, h as isize - 1) as usize;
+                    src[yi * w + xi]
+                };
+                let top = at(x0, y0).lerp(at(x0 + 1.0, y0), tx);
+                let bot = at(x0, y0 + 1.0).lerp(at(x0 + 1.0, y0 + 1.0), tx);
+                s += top.lerp(bot, ty);
+            }
+            *o = s / taps as f32;
+        }
+    });
+    out
 }
 
 /// JPEG bytes at `quality` (1-100).
@@ -179,6 +238,9 @@ mod tests {
             blur: 0.7,
             shot: 0.02,
             read: 0.004,
+            mono_noise: 0.0,
+            motion: [0.0; 2],
+            highlight_guard: false,
             seed: 9,
         };
         let buf: Vec<Vec3> = (0..64 * 64)
@@ -193,5 +255,53 @@ mod tests {
         assert_eq!(&j[..2], &[0xFF, 0xD8]);
         let p = encode_png(&a).unwrap();
         assert_eq!(&p[1..4], b"PNG");
+    }
+
+    #[test]
+    fn motion_blur_smears_along_its_direction_and_mono_noise_is_grey() {
+        let base = Sensor {
+            exposure_ev: 0.0,
+            target: 0.18,
+            wb: Vec3::ONE,
+            vignette: 0.0,
+            blur: 0.0,
+            shot: 0.0,
+            read: 0.0,
+            mono_noise: 0.0,
+            motion: [0.0; 2],
+            highlight_guard: false,
+            seed: 3,
+        };
+        // A bright dot on grey: horizontal motion spreads it along x, not along y.
+        let mut buf = vec![Vec3::splat(0.1); 32 * 32];
+        buf[16 * 32 + 16] = Vec3::splat(5.0);
+        let s = Sensor {
+            motion: [8.0, 0.0],
+            ..base.clone()
+        };
+        let img = s.develop(&buf, 32, 32);
+        let sharp = base.develop(&buf, 32, 32);
+        assert!(img.get_pixel(20, 16)[0] > sharp.get_pixel(20, 16)[0] + 10);
+        assert_eq!(img.get_pixel(16, 20), sharp.get_pixel(16, 20));
+        // Grey noise only: the three channels move together.
+        let flat = vec![Vec3::splat(0.2); 32 * 32];
+        let noisy = Sensor {
+            read: 0.05,
+            mono_noise: 1.0,
+            ..base.clone()
+        };
+        let img = noisy.develop(&flat, 32, 32);
+        let spread = |im: &RgbImage| {
+            im.pixels()
+                .map(|p| (p[0] as i32 - p[2] as i32).abs())
+                .max()
+                .unwrap()
+        };
+        assert!(spread(&img) <= 1, "mono noise is coloured");
+        let colour = Sensor {
+            mono_noise: 0.0,
+            ..noisy
+        };
+        assert!(spread(&colour.develop(&flat, 32, 32)) > 5);
     }
 }

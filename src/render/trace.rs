@@ -23,6 +23,7 @@ use obvhs::{
 use rayon::prelude::*;
 
 use super::camera::Camera;
+use super::distractor::{PropMaterial, PROP_BASE};
 use super::light::{AreaLight, Environment};
 use super::material::{Background, SkinMaterial, Surface};
 use super::noise::unit;
@@ -39,7 +40,8 @@ pub struct Geometry {
     /// Joint redness per vertex (0..1); above 1, cut-surface codes (`material::CUT_MEAT`).
     pub redness: Vec<f32>,
     pub triangles: Vec<[u32; 3]>,
-    /// Instance index (0-based) per triangle.
+    /// Instance index (0-based) per triangle; distractors from
+    /// [`super::distractor::PROP_BASE`] up.
     pub tri_instance: Vec<u16>,
 }
 
@@ -48,10 +50,15 @@ pub struct Geometry {
 pub struct Look {
     pub camera: Camera,
     pub light: AreaLight,
+    /// Further lights (the `lighting` group): soft boxes and near point-like lamps, one
+    /// shadow ray each; empty in the base look.
+    pub fill: Vec<AreaLight>,
     pub env: Environment,
     pub background: Background,
     /// One skin per instance.
     pub skins: Vec<SkinMaterial>,
+    /// One material per distractor (instance `PROP_BASE + k`).
+    pub props: Vec<PropMaterial>,
     pub shadow_samples: u32,
     /// Radius (pixels) of the edge-aware shadow-visibility filter; 0 = off.
     pub shadow_filter: usize,
@@ -284,8 +291,11 @@ impl Tracer {
         }
         let rest = geo.rest[a] * u + geo.rest[b] * v + geo.rest[c] * w;
         let red = geo.redness[a] * u + geo.redness[b] * v + geo.redness[c] * w;
-        let inst = geo.tri_instance[tri] as usize;
-        (look.skins[inst].surface(rest, n, red), ng)
+        let inst = geo.tri_instance[tri];
+        if inst >= PROP_BASE {
+            return (look.props[(inst - PROP_BASE) as usize].surface(p, n), ng);
+        }
+        (look.skins[inst as usize].surface(rest, n, red), ng)
     }
 
     /// Key light (unshadowed, and the fraction of shadow rays that reached it) plus the
@@ -349,11 +359,49 @@ impl Tracer {
                 * light_coverage(light, p, r, 0.1);
         }
         direct += spec;
-        let vis = if tried == 0 {
+        let mut vis = if tried == 0 {
             1.0
         } else {
             seen as f32 / tried as f32
         };
+        if !look.fill.is_empty() {
+            // Further lights, one shadow ray each; the filtered visibility becomes the
+            // luminance-weighted mean of the lights' visibilities.
+            let lum = |c: Vec3| c.dot(Vec3::new(0.2126, 0.7152, 0.0722));
+            let (mut num, mut den) = (lum(direct) * vis, lum(direct));
+            for (i, fl) in look.fill.iter().enumerate() {
+                let hsh = hash(look.seed, pix, 1000 + i as u64, 0x33);
+                let lp = fl.point(unit(hsh), unit(hsh.rotate_left(31)));
+                let lv = lp - p;
+                let dist2 = lv.length_squared();
+                let dist = dist2.sqrt();
+                let l = lv / dist;
+                let cos_l = (-l.z).max(0.0);
+                let ndl = n.dot(l);
+                let wrapped = ((ndl + s.wrap) / (1.0 + s.wrap)).max(0.0);
+                let mut d_i = Vec3::ZERO;
+                if cos_l > 0.0 && wrapped > 0.0 {
+                    let lambert = ndl.max(0.0);
+                    let diffuse = s.albedo
+                        * (1.0 - s.metallic)
+                        * (Vec3::splat(lambert) + (wrapped - lambert) * s.sss_tint)
+                        / std::f32::consts::PI;
+                    d_i = fl.color * (cos_l / dist2) * fl.area() * diffuse;
+                }
+                d_i += fr * fl.color * light_coverage(fl, p, r, s.roughness);
+                let v_i = if skip_shadow || d_i == Vec3::ZERO {
+                    1.0
+                } else if self.unoccluded(origin, l, dist - 1e-3) {
+                    1.0
+                } else {
+                    0.0
+                };
+                num += lum(d_i) * v_i;
+                den += lum(d_i);
+                direct += d_i;
+            }
+            vis = if den > 1e-12 { num / den } else { vis };
+        }
         let amb = look.env.ambient * (0.55 + 0.45 * n.z.max(-1.0));
         let ambient = s.albedo * (1.0 - s.metallic) * amb;
         // Specular of the room for dielectrics (wet sheen); metals get a traced reflection.
