@@ -113,7 +113,8 @@ enum Command {
         #[arg(long, conflicts_with = "onnx")]
         device: Option<DeviceKind>,
     },
-    /// Export a checkpoint for other tools: ONNX (ultralytics' layout) or safetensors.
+    /// Export a checkpoint for other tools: ONNX (YOLO: ultralytics' layout; Mask R-CNN:
+    /// three graphs) or safetensors (ultralytics' / torchvision's key names).
     Export {
         #[arg(long)]
         checkpoint: PathBuf,

@@ -6,6 +6,7 @@
 //! logits and deltas, the box head + predictor and the mask head + predictor (background
 //! class moved/dropped). Tolerance: |ours − torchvision| ≤ 1e-4 · max(1, |torchvision|).
 //! Mapping errors name the first key that does not fit; truncated files name the file.
+//! The export (`torchvision_state_dict`) gives the fixture's state dict back.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -13,11 +14,14 @@ use std::path::{Path, PathBuf};
 use burn::tensor::{Device, Tensor, TensorData};
 use chicktrain::model::maskrcnn::mask_head::MaskHeadConfig;
 use chicktrain::model::maskrcnn::roi_heads::RoiHeadsConfig;
-use chicktrain::model::maskrcnn::torchvision::{class_dependent, map_state_dict, TorchvisionKind};
+use chicktrain::model::maskrcnn::torchvision::{
+    class_dependent, map_state_dict, torchvision_state_dict, TorchvisionKind,
+};
 use chicktrain::model::maskrcnn::{MaskRcnnConfig, STRIDES};
 use chicktrain::model::weights::{self, apply_named, snapshot_data};
 use chicktrain::train::detector::{Detector, DetectorConfig};
 use chicktrain::train::init::load_init;
+use chicktrain::util::state_dict::HostData;
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -192,6 +196,52 @@ fn maskrcnn_state_dict_gives_torchvision_features_rpn_and_heads() {
         mask,
         &TensorData::new(want_mask, [3, 1, 28, 28]),
     );
+}
+
+/// Export is the import read backwards: the model imported from the torchvision fixture
+/// gives back the fixture's state dict — every key, shape and value bit for bit — except
+/// the background's box deltas and mask logits, which chicktrain does not keep and writes
+/// as zeros (torchvision's inference never reads them).
+#[test]
+fn export_gives_the_torchvision_state_dict_back() {
+    let dev = Device::flex();
+    let path = fixture("maskrcnn_r50_w8.pth");
+    let (det, _) = init_from(fixture_config(), &path, &dev).unwrap();
+    let Detector::MaskRcnn(m) = det else { panic!() };
+    let exported = torchvision_state_dict(&m).unwrap();
+    let file: HashMap<String, TensorData> = weights::read_file(&path, &[])
+        .unwrap()
+        .into_iter()
+        .filter(|s| !s.name.ends_with("num_batches_tracked"))
+        .map(|s| (s.name.clone(), snapshot_data(s).unwrap()))
+        .collect();
+    assert_eq!(exported.len(), file.len(), "tensor count");
+    for (k, t) in &exported {
+        let want = file
+            .get(k)
+            .unwrap_or_else(|| panic!("{k} is not a torchvision key"));
+        assert_eq!(&t.shape, &want.shape().to_vec(), "{k}: shape");
+        let HostData::F32(v) = &t.data else {
+            panic!("{k}: not f32")
+        };
+        let mut w = want.to_vec_f32();
+        // The background's rows: 4 box deltas (bias [4], weight rows [4, in]), one mask
+        // channel.
+        let bg = match k.as_str() {
+            "roi_heads.box_predictor.bbox_pred.bias" => 4,
+            "roi_heads.box_predictor.bbox_pred.weight" => 4 * t.shape[1],
+            "roi_heads.mask_predictor.mask_fcn_logits.bias" => 1,
+            "roi_heads.mask_predictor.mask_fcn_logits.weight" => t.shape[1..].iter().product(),
+            _ => 0,
+        };
+        assert!(
+            v[..bg].iter().all(|x| *x == 0.0),
+            "{k}: background not zero"
+        );
+        w[..bg].iter_mut().for_each(|x| *x = 0.0);
+        let same = v.iter().zip(&w).all(|(a, b)| a.to_bits() == b.to_bits());
+        assert!(same, "{k}: values differ from the torchvision file");
+    }
 }
 
 #[test]

@@ -13,7 +13,8 @@ use crate::train::checkpoint::Checkpoint;
 /// The formats `export` writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExportFormat {
-    /// The inference graph in ultralytics' ONNX layout (YOLO-seg).
+    /// The inference graph: ultralytics' ONNX layout (YOLO-seg), or Mask R-CNN's
+    /// backbone + RPN head, box head and mask head graphs.
     Onnx,
     /// The state dict under ultralytics' / torchvision's key names.
     Safetensors,
@@ -54,6 +55,11 @@ pub fn export_cmd(r: &ExportRequest) -> Result<String> {
     let out = out_path(&r.checkpoint, r.format, r.out.as_deref());
     if out == r.checkpoint {
         bail!("--out {} would overwrite the checkpoint", out.display());
+    }
+    if r.format == ExportFormat::Safetensors && (r.dynamic || r.reference || r.batch != 1) {
+        bail!(
+            "--dynamic, --batch and --reference are ONNX options; --format safetensors writes the weights only"
+        );
     }
     match r.format {
         ExportFormat::Onnx => export_onnx(&OnnxExport {

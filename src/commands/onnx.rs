@@ -1,8 +1,10 @@
 //! The ONNX side of `export` and `predict --onnx`: a checkpoint's YOLO-seg as an ONNX
-//! file in ultralytics' layout (optionally with a reference input and chicktrain's own
-//! outputs for it, which `bench/onnx_check.py` compares against ONNX Runtime), and
-//! predictions from such a file through tract with the same postprocess and outputs as
-//! `predict --checkpoint`.
+//! file in ultralytics' layout, or a Mask R-CNN as three graphs (backbone + FPN + RPN
+//! head, box head, mask head; `model::maskrcnn::onnx`), optionally with a reference
+//! input and chicktrain's own outputs for it, which `bench/onnx_check.py` and
+//! `bench/maskrcnn_export_check.py` compare against ONNX Runtime; and
+//! predictions from such a file (or a Mask R-CNN export's three graphs) through tract
+//! with the same postprocess and outputs as `predict --checkpoint`.
 
 use std::path::{Path, PathBuf};
 
@@ -15,6 +17,10 @@ use super::train::{predict_images, PredictClasses};
 use crate::bench::engines::bench_engines;
 use crate::bench::models::parse_sizes;
 use crate::bench::variant::Variant;
+use crate::model::maskrcnn::onnx::{
+    export_maskrcnn, OnnxMaskRcnn, BOX_INPUT, BOX_OUTPUTS, LEVELS, MASK_INPUT, MASK_OUTPUT,
+};
+use crate::model::maskrcnn::{infer, MaskRcnn, MaskRcnnConfig, STRIDES};
 use crate::model::onnx::engine::{set_threads, TractEngine};
 use crate::model::onnx::graph::encode;
 use crate::model::yolo::onnx::{export_yolo, ultralytics_output0, OnnxExportOptions};
@@ -53,13 +59,9 @@ pub fn export_onnx(r: &OnnxExport) -> Result<String> {
         .with_context(|| format!("in checkpoint {}", r.checkpoint.display()))?;
     let yolo = match &model {
         Detector::Yolo(m) => m,
-        Detector::MaskRcnn(_) => bail!(
-            "{}: ONNX export of Mask R-CNN is not implemented yet (only YOLO-seg exports; \
-             the backbone + FPN + RPN + heads graph with RoIAlign is what is left)",
-            r.checkpoint.display()
-        ),
+        Detector::MaskRcnn(m) => return export_maskrcnn_onnx(r, &ck, m),
         Detector::Mask2Former(_) => bail!(
-            "{}: ONNX export of Mask2Former is not implemented (only YOLO-seg exports)",
+            "{}: ONNX export of Mask2Former is not implemented (YOLO-seg and Mask R-CNN export)",
             r.checkpoint.display()
         ),
     };
@@ -104,6 +106,140 @@ pub fn export_onnx(r: &OnnxExport) -> Result<String> {
         write_atomic(&path, &file)?;
         msg.push_str(&format!(
             "\nreference input (seed {REFERENCE_SEED}) and chicktrain's outputs: {}",
+            path.display()
+        ));
+    }
+    Ok(msg)
+}
+
+/// Paths of the RoI head graphs beside an exported Mask R-CNN `best.onnx`.
+pub fn roi_head_paths(onnx: &Path) -> [PathBuf; 2] {
+    [
+        onnx.with_extension("box_head.onnx"),
+        onnx.with_extension("mask_head.onnx"),
+    ]
+}
+
+/// RoIs in the reference inputs of the RoI head graphs.
+const REFERENCE_ROIS: usize = 4;
+
+/// Mask R-CNN: three graphs ([`crate::model::maskrcnn::onnx`]), written all or none.
+fn export_maskrcnn_onnx(r: &OnnxExport, ck: &Checkpoint, m: &MaskRcnn) -> Result<String> {
+    let size = ck.header.model.input_size();
+    let [box_path, mask_path] = roi_head_paths(&r.out);
+    let file = |p: &Path| {
+        p.file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let meta = vec![
+        ("chicktrain_model".to_string(), "maskrcnn".to_string()),
+        (
+            "chicktrain_maskrcnn".into(),
+            serde_json::to_string(&m.config)?,
+        ),
+        (
+            "names".into(),
+            serde_json::to_string(&ck.header.class_names)?,
+        ),
+        (
+            "chicktrain_category_ids".into(),
+            serde_json::to_string(&ck.header.category_ids)?,
+        ),
+        ("strides".into(), serde_json::to_string(&STRIDES)?),
+        ("box_head".into(), file(&box_path)),
+        ("mask_head".into(), file(&mask_path)),
+    ];
+    let g = export_maskrcnn(m, [size, size], (!r.dynamic).then_some(r.batch), &meta)
+        .with_context(|| format!("exporting {}", r.checkpoint.display()))?;
+    let files = [
+        (r.out.clone(), encode(&g.backbone)),
+        (box_path.clone(), encode(&g.box_head)),
+        (mask_path.clone(), encode(&g.mask_head)),
+    ];
+    for (k, (p, bytes)) in files.iter().enumerate() {
+        if let Err(e) = write_atomic(p, bytes) {
+            for (done, _) in &files[..k] {
+                let _ = std::fs::remove_file(done);
+            }
+            return Err(e);
+        }
+    }
+    let c = m.fpn.channels;
+    let nc = m.num_classes();
+    let (pb, pm) = (m.config.roi.pool_size, m.config.mask.pool_size);
+    let mut msg = format!(
+        "{} → {} ({:.1} MB, opset 17: images [{}, 3, {size}, {size}] → p2…p6, rpn_objectness.pN, rpn_deltas.pN), \
+         {} (box_features [rois, {c}, {pb}, {pb}] → class_logits [rois, {}], box_deltas [rois, {}]), \
+         {} (mask_features [rois, {c}, {pm}, {pm}] → mask_logits [rois, {}, {}, {}]); \
+         anchors, proposals, RoIAlign, box decoding, NMS and mask pasting stay outside the graphs",
+        r.checkpoint.display(),
+        r.out.display(),
+        files[0].1.len() as f64 / 1e6,
+        if r.dynamic { "batch".to_string() } else { r.batch.to_string() },
+        box_path.display(),
+        nc + 1,
+        m.box_head.bbox_pred.weight.dims()[1],
+        mask_path.display(),
+        m.mask_head.predictor.weight.dims()[0],
+        2 * pm,
+        2 * pm,
+    );
+    if r.reference {
+        let dev = Device::flex();
+        let b = r.batch;
+        let mut rng = ChaCha8Rng::seed_from_u64(REFERENCE_SEED);
+        let mut uniform = |n: usize| -> Vec<f32> { (0..n).map(|_| rng.random::<f32>()).collect() };
+        let x = uniform(b * 3 * size * size);
+        let feats = m.features(Tensor::<4>::from_data(
+            TensorData::new(x.clone(), [b, 3, size, size]),
+            &dev,
+        ));
+        let maps = m.rpn.forward_levels(&feats);
+        let mut named: Vec<(String, Vec<usize>, Vec<f32>)> =
+            vec![("images".into(), vec![b, 3, size, size], x)];
+        let mut host4 = |name: String, t: Tensor<4>| {
+            let s = t.dims().to_vec();
+            named.push((name, s, to_host(t)));
+        };
+        for (l, f) in feats.into_iter().enumerate() {
+            host4(LEVELS[l].to_string(), f);
+        }
+        let (obj, del): (Vec<_>, Vec<_>) = maps.into_iter().unzip();
+        for (l, t) in obj.into_iter().enumerate() {
+            host4(format!("rpn_objectness.{}", LEVELS[l]), t);
+        }
+        for (l, t) in del.into_iter().enumerate() {
+            host4(format!("rpn_deltas.{}", LEVELS[l]), t);
+        }
+        let n = REFERENCE_ROIS;
+        let bx = uniform(n * c * pb * pb);
+        let mx = uniform(n * c * pm * pm);
+        let (cls, deltas) = m.box_head.forward(Tensor::from_data(
+            TensorData::new(bx.clone(), [n, c, pb, pb]),
+            &dev,
+        ));
+        let logits = m.mask_head.forward(Tensor::from_data(
+            TensorData::new(mx.clone(), [n, c, pm, pm]),
+            &dev,
+        ));
+        named.push((BOX_INPUT.into(), vec![n, c, pb, pb], bx));
+        named.push((BOX_OUTPUTS[0].into(), cls.dims().to_vec(), to_host(cls)));
+        named.push((
+            BOX_OUTPUTS[1].into(),
+            deltas.dims().to_vec(),
+            to_host(deltas),
+        ));
+        named.push((MASK_INPUT.into(), vec![n, c, pm, pm], mx));
+        named.push((MASK_OUTPUT.into(), logits.dims().to_vec(), to_host(logits)));
+        let refs: Vec<(&str, &[usize], &[f32])> = named
+            .iter()
+            .map(|(k, s, v)| (k.as_str(), s.as_slice(), v.as_slice()))
+            .collect();
+        let path = reference_path(&r.out);
+        write_atomic(&path, &safetensors_f32(&refs))?;
+        msg.push_str(&format!(
+            "\nreference inputs (seed {REFERENCE_SEED}) and chicktrain's outputs of all three graphs: {}",
             path.display()
         ));
     }
@@ -253,6 +389,9 @@ pub fn predict_onnx(
 ) -> Result<String> {
     set_threads(threads.unwrap_or_else(all_cores));
     let eng = TractEngine::load(onnx, Some(1))?;
+    if eng.metadata("chicktrain_model") == Some("maskrcnn") {
+        return predict_maskrcnn_onnx(eng, input, out_dir, conf);
+    }
     let info = model_info(&eng)?;
     let size = info.size;
     let nc = info.num_classes;
@@ -285,6 +424,70 @@ pub fn predict_onnx(
         },
     )?;
     Ok(format!("{text} (tract, {})", onnx.display()))
+}
+
+/// `predict --onnx` of a Mask R-CNN export: the three graphs through tract, everything
+/// between them (anchors, proposals, RoIAlign, box decoding, NMS, masks) by chicktrain's
+/// own code, so the detections are those of `predict --checkpoint` up to the engines'
+/// float differences.
+fn predict_maskrcnn_onnx(
+    eng: TractEngine,
+    input: &Path,
+    out_dir: &Path,
+    conf: f32,
+) -> Result<String> {
+    let p = eng.path.clone();
+    let pd = p.display();
+    let meta = |k: &str| {
+        eng.metadata(k).map(str::to_string).with_context(|| {
+            format!("{pd}: no `{k}` metadata (not a chicktrain Mask R-CNN export)")
+        })
+    };
+    let cfg: MaskRcnnConfig = serde_json::from_str(&meta("chicktrain_maskrcnn")?)
+        .with_context(|| format!("{pd}: metadata chicktrain_maskrcnn"))?;
+    let names: Vec<String> =
+        serde_json::from_str(&meta("names")?).with_context(|| format!("{pd}: metadata names"))?;
+    let ids: Vec<u64> = serde_json::from_str(&meta("chicktrain_category_ids")?)
+        .with_context(|| format!("{pd}: metadata chicktrain_category_ids"))?;
+    ensure!(
+        names.len() == cfg.num_classes && ids.len() == cfg.num_classes,
+        "{pd}: {} names and {} category ids for {} classes",
+        names.len(),
+        ids.len(),
+        cfg.num_classes
+    );
+    let s = &eng.input_shape;
+    let size = match s.as_slice() {
+        [_, Some(3), Some(h), Some(w)] if h == w => *h,
+        _ => bail!(
+            "{pd}: input must be [B, 3, S, S] with a fixed square size, the file declares {s:?}"
+        ),
+    };
+    let dir = p.parent().unwrap_or(Path::new("."));
+    let head = |k: &str| -> Result<TractEngine> {
+        let f = dir.join(meta(k)?);
+        TractEngine::load(&f, None).with_context(|| format!("the {k} graph of {pd}"))
+    };
+    let net = OnnxMaskRcnn {
+        box_head: head("box_head")?,
+        mask_head: head("mask_head")?,
+        backbone: eng,
+        device: Device::flex(),
+    };
+    let classes = PredictClasses {
+        category_ids: ids,
+        names,
+    };
+    let text = predict_images(input, out_dir, size as u32, &classes, conf, &mut |px| {
+        let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &net.device);
+        let mut d = infer(&net, &cfg, x)?.swap_remove(0);
+        d.retain(|x| x.score >= conf);
+        Ok(d)
+    })?;
+    Ok(format!(
+        "{text} (tract, {} + its two RoI head graphs)",
+        p.display()
+    ))
 }
 
 fn all_cores() -> usize {

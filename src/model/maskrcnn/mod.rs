@@ -6,6 +6,7 @@
 //! - Trainable modules: [`resnet`], [`fpn`], [`rpn`] (head + proposals + loss),
 //!   [`roi_heads`] (box head + targets + loss + inference), [`mask_head`] (logits; loss,
 //!   targets and pasting beside it).
+//! - Weights out: [`torchvision`] (state dict names, both ways), [`onnx`] (three graphs).
 //!
 //! [`MaskRcnnConfig`] builds the model; "compact" defaults ([`MaskRcnnConfig::new`]) are
 //! sized for CPU and the carcass scene (≤ 12 instances, one class, top view): 128-wide FPN,
@@ -19,6 +20,7 @@ pub mod fpn;
 pub mod losses;
 pub mod mask_head;
 pub mod matcher;
+pub mod onnx;
 pub mod pooler;
 pub mod resnet;
 pub mod roi_align;
@@ -391,88 +393,8 @@ impl MaskRcnn {
     /// # Shapes
     /// - `images`: `[B, 3, H, W]` in `[0, 1]` → `B` lists; `mask` holds `M × M` probabilities
     pub fn forward_infer(&self, images: Tensor<4>) -> Vec<Vec<Detection>> {
-        let [h, w] = self.check_input(&images);
-        let b = images.dims()[0];
-        let cfg = &self.config;
-        let feats = self.features(images);
-        let rpn_out = self.rpn.forward(&feats, &STRIDES);
-        let anchors = cfg.anchors.generate(&rpn_out.levels);
-        let proposals = find_proposals(
-            &rpn_out,
-            &anchors,
-            [h, w],
-            cfg.rpn.pre_nms_topk_test,
-            cfg.rpn.post_nms_topk_test,
-            cfg.rpn.nms_iou,
-        );
-        let rois: Vec<(usize, [f32; 4])> = proposals
-            .iter()
-            .enumerate()
-            .flat_map(|(i, p)| p.iter().map(move |q| (i, q.0)))
-            .collect();
-        if rois.is_empty() {
-            return vec![Vec::new(); b];
-        }
-        let pooled = pool_levels(
-            &feats[..4],
-            2,
-            &rois,
-            cfg.roi.pool_size,
-            cfg.roi.sampling_ratio,
-        );
-        let (cls, deltas) = self.box_head.forward(pooled);
-        let dets = box_inference(cls, deltas, &rois, b, [h, w], &cfg.roi);
-        let det_rois: Vec<(usize, [f32; 4])> = dets
-            .iter()
-            .enumerate()
-            .flat_map(|(i, d)| d.iter().map(move |x| (i, x.0)))
-            .collect();
-        if det_rois.is_empty() {
-            return vec![Vec::new(); b];
-        }
-        let pooled = pool_levels(
-            &feats[..4],
-            2,
-            &det_rois,
-            cfg.mask.pool_size,
-            cfg.mask.sampling_ratio,
-        );
-        let logits = self.mask_head.forward(pooled);
-        let [n, k, m, _] = logits.dims();
-        let probs = to_host(sigmoid(logits));
-        let flat: Vec<([f32; 4], f32, usize, usize)> = dets
-            .iter()
-            .enumerate()
-            .flat_map(|(i, d)| d.iter().map(move |x| (x.0, x.1, x.2, i)))
-            .collect();
-        debug_assert_eq!(flat.len(), n);
-        let thr = cfg.mask.threshold;
-        let built: Vec<(usize, Detection)> = flat
-            .iter()
-            .enumerate()
-            .map(|(r, &(bx, score, class, img))| {
-                let ch = if k == 1 { 0 } else { class };
-                let p = &probs[(r * k + ch) * m * m..(r * k + ch + 1) * m * m];
-                (
-                    img,
-                    Detection {
-                        bbox: [bx[0], bx[1], bx[2] - bx[0], bx[3] - bx[1]],
-                        score,
-                        class,
-                        mask: MaskSource::RoiProbs {
-                            probs: p.to_vec(),
-                            size: m,
-                            threshold: thr,
-                        },
-                    },
-                )
-            })
-            .collect();
-        let mut out = vec![Vec::new(); b];
-        for (img, d) in built {
-            out[img].push(d);
-        }
-        out
+        self.check_input(&images);
+        infer(self, &self.config, images).expect("chicktrain's own modules do not fail")
     }
 
     pub fn num_classes(&self) -> usize {
@@ -500,6 +422,129 @@ impl MaskRcnn {
             input,
         }
     }
+}
+
+/// The network pieces of inference, apart from the data-dependent steps between them, so
+/// that one postprocess ([`infer`]) serves chicktrain's modules and the exported ONNX
+/// graphs run by tract (`predict --onnx`, [`onnx::OnnxMaskRcnn`]).
+pub trait InferenceNet {
+    /// P2…P6 of `[0, 1]` images and the RPN head's raw maps per level
+    /// ([`RpnHead::forward_levels`]).
+    #[allow(clippy::type_complexity)]
+    fn features_and_rpn(
+        &self,
+        images: Tensor<4>,
+    ) -> anyhow::Result<(Vec<Tensor<4>>, Vec<(Tensor<4>, Tensor<4>)>)>;
+    /// Pooled `[N, C, P, P]` → class logits `[N, nc + 1]`, deltas `[N, 4·nc]`.
+    fn box_head(&self, pooled: Tensor<4>) -> anyhow::Result<(Tensor<2>, Tensor<2>)>;
+    /// Pooled `[N, C, P, P]` → mask logits `[N, K, 2P, 2P]`.
+    fn mask_head(&self, pooled: Tensor<4>) -> anyhow::Result<Tensor<4>>;
+}
+
+impl InferenceNet for MaskRcnn {
+    fn features_and_rpn(
+        &self,
+        images: Tensor<4>,
+    ) -> anyhow::Result<(Vec<Tensor<4>>, Vec<(Tensor<4>, Tensor<4>)>)> {
+        let feats = self.features(images);
+        let maps = self.rpn.forward_levels(&feats);
+        Ok((feats, maps))
+    }
+    fn box_head(&self, pooled: Tensor<4>) -> anyhow::Result<(Tensor<2>, Tensor<2>)> {
+        Ok(self.box_head.forward(pooled))
+    }
+    fn mask_head(&self, pooled: Tensor<4>) -> anyhow::Result<Tensor<4>> {
+        Ok(self.mask_head.forward(pooled))
+    }
+}
+
+/// Inference of `net` (a model of `cfg`): per image, at most `roi.max_det` detections,
+/// each with its RoI's mask probabilities. See [`MaskRcnn::forward_infer`].
+pub fn infer<N: InferenceNet + ?Sized>(
+    net: &N,
+    cfg: &MaskRcnnConfig,
+    images: Tensor<4>,
+) -> anyhow::Result<Vec<Vec<Detection>>> {
+    let [b, _, h, w] = images.dims();
+    let (feats, maps) = net.features_and_rpn(images)?;
+    let rpn_out = rpn::RpnOutput::from_levels(maps, &STRIDES, cfg.anchors.per_location());
+    let anchors = cfg.anchors.generate(&rpn_out.levels);
+    let proposals = find_proposals(
+        &rpn_out,
+        &anchors,
+        [h, w],
+        cfg.rpn.pre_nms_topk_test,
+        cfg.rpn.post_nms_topk_test,
+        cfg.rpn.nms_iou,
+    );
+    let rois: Vec<(usize, [f32; 4])> = proposals
+        .iter()
+        .enumerate()
+        .flat_map(|(i, p)| p.iter().map(move |q| (i, q.0)))
+        .collect();
+    if rois.is_empty() {
+        return Ok(vec![Vec::new(); b]);
+    }
+    let pooled = pool_levels(
+        &feats[..4],
+        2,
+        &rois,
+        cfg.roi.pool_size,
+        cfg.roi.sampling_ratio,
+    );
+    let (cls, deltas) = net.box_head(pooled)?;
+    let dets = box_inference(cls, deltas, &rois, b, [h, w], &cfg.roi);
+    let det_rois: Vec<(usize, [f32; 4])> = dets
+        .iter()
+        .enumerate()
+        .flat_map(|(i, d)| d.iter().map(move |x| (i, x.0)))
+        .collect();
+    if det_rois.is_empty() {
+        return Ok(vec![Vec::new(); b]);
+    }
+    let pooled = pool_levels(
+        &feats[..4],
+        2,
+        &det_rois,
+        cfg.mask.pool_size,
+        cfg.mask.sampling_ratio,
+    );
+    let logits = net.mask_head(pooled)?;
+    let [n, k, m, _] = logits.dims();
+    let probs = to_host(sigmoid(logits));
+    let flat: Vec<([f32; 4], f32, usize, usize)> = dets
+        .iter()
+        .enumerate()
+        .flat_map(|(i, d)| d.iter().map(move |x| (x.0, x.1, x.2, i)))
+        .collect();
+    debug_assert_eq!(flat.len(), n);
+    let thr = cfg.mask.threshold;
+    let built: Vec<(usize, Detection)> = flat
+        .iter()
+        .enumerate()
+        .map(|(r, &(bx, score, class, img))| {
+            let ch = if k == 1 { 0 } else { class };
+            let p = &probs[(r * k + ch) * m * m..(r * k + ch + 1) * m * m];
+            (
+                img,
+                Detection {
+                    bbox: [bx[0], bx[1], bx[2] - bx[0], bx[3] - bx[1]],
+                    score,
+                    class,
+                    mask: MaskSource::RoiProbs {
+                        probs: p.to_vec(),
+                        size: m,
+                        threshold: thr,
+                    },
+                },
+            )
+        })
+        .collect();
+    let mut out = vec![Vec::new(); b];
+    for (img, d) in built {
+        out[img].push(d);
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -122,6 +122,30 @@ pub struct RpnOutput {
     pub levels: Vec<(usize, usize, usize)>,
 }
 
+impl RpnOutput {
+    /// Levels' raw maps ([`RpnHead::forward_levels`], or an ONNX runtime's outputs)
+    /// flattened and concatenated; `a` anchors per location.
+    pub fn from_levels(maps: Vec<(Tensor<4>, Tensor<4>)>, strides: &[usize], a: usize) -> Self {
+        let mut logits = Vec::new();
+        let mut deltas = Vec::new();
+        let mut levels = Vec::new();
+        for ((o, d), &s) in maps.into_iter().zip(strides) {
+            let [b, _, h, w] = o.dims();
+            // [B, A, H, W] → [B, H, W, A] → [B, HWA]
+            logits.push(o.permute([0, 2, 3, 1]).reshape([b, h * w * a]));
+            // [B, 4A, H, W] → [B, A, 4, H, W] → [B, H, W, A, 4] → [B, HWA, 4]
+            let d: Tensor<5> = d.reshape([b, a, 4, h, w]);
+            deltas.push(d.permute([0, 3, 4, 1, 2]).reshape([b, h * w * a, 4]));
+            levels.push((s, h, w));
+        }
+        RpnOutput {
+            logits: Tensor::cat(logits, 1),
+            deltas: Tensor::cat(deltas, 1),
+            levels,
+        }
+    }
+}
+
 impl RpnHead {
     /// `channels`: the FPN's output channels; `num_anchors` per location.
     pub fn new(channels: usize, num_anchors: usize, device: &Device) -> Self {
@@ -158,30 +182,22 @@ impl RpnHead {
     /// - `feats[l]`: `[B, C, H_l, W_l]` with stride `strides[l]`
     /// - returns logits `[B, Σ H_l W_l A]`, deltas `[B, Σ H_l W_l A, 4]`
     pub fn forward(&self, feats: &[Tensor<4>], strides: &[usize]) -> RpnOutput {
-        let a = self.num_anchors;
-        let mut logits = Vec::new();
-        let mut deltas = Vec::new();
-        let mut levels = Vec::new();
-        for (f, &s) in feats.iter().zip(strides) {
-            let [b, _, h, w] = f.dims();
-            let t = relu(self.conv.forward(f.clone()));
-            // [B, A, H, W] → [B, H, W, A] → [B, HWA]
-            logits.push(
-                self.objectness
-                    .forward(t.clone())
-                    .permute([0, 2, 3, 1])
-                    .reshape([b, h * w * a]),
-            );
-            // [B, 4A, H, W] → [B, A, 4, H, W] → [B, H, W, A, 4] → [B, HWA, 4]
-            let d: Tensor<5> = self.deltas.forward(t).reshape([b, a, 4, h, w]);
-            deltas.push(d.permute([0, 3, 4, 1, 2]).reshape([b, h * w * a, 4]));
-            levels.push((s, h, w));
-        }
-        RpnOutput {
-            logits: Tensor::cat(logits, 1),
-            deltas: Tensor::cat(deltas, 1),
-            levels,
-        }
+        RpnOutput::from_levels(self.forward_levels(feats), strides, self.num_anchors)
+    }
+
+    /// The head's raw maps per level, in torchvision's `RPNHead` layout (what the ONNX
+    /// export outputs).
+    ///
+    /// # Shapes
+    /// - `feats[l]`: `[B, C, H_l, W_l]` → objectness `[B, A, H_l, W_l]`, deltas `[B, 4A, H_l, W_l]`
+    pub fn forward_levels(&self, feats: &[Tensor<4>]) -> Vec<(Tensor<4>, Tensor<4>)> {
+        feats
+            .iter()
+            .map(|f| {
+                let t = relu(self.conv.forward(f.clone()));
+                (self.objectness.forward(t.clone()), self.deltas.forward(t))
+            })
+            .collect()
     }
 
     pub fn macs(&self, sizes: &[[usize; 2]]) -> u64 {

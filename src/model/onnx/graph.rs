@@ -281,6 +281,10 @@ impl GraphBuilder {
         self.binary(scope, "Mul", x, &s)
     }
 
+    pub fn relu(&mut self, scope: &str, x: &str) -> String {
+        self.one(scope, "Relu", &[x], vec![])
+    }
+
     pub fn sigmoid(&mut self, scope: &str, x: &str) -> String {
         self.one(scope, "Sigmoid", &[x], vec![])
     }

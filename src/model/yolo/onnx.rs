@@ -15,8 +15,7 @@
 //! The metadata keys ultralytics' `AutoBackend` reads (`task`, `stride`, `imgsz`,
 //! `batch`, `names`, …) are written as it writes them (Python literals).
 
-use anyhow::{bail, ensure, Result};
-use burn::nn::conv::Conv2d;
+use anyhow::{ensure, Result};
 use burn::nn::PaddingConfig2d;
 
 use super::attention::{Attention, C2psa, PsaBlock};
@@ -24,6 +23,7 @@ use super::blocks::{Bottleneck, C3k, C3k2, C3k2Inner, ConvBn, Proto, Sppf};
 use super::head::REG_MAX;
 use super::{AnchorGrid, YoloOutput, YoloSeg};
 use crate::model::onnx::graph::{Dim, GraphBuilder, OPSET};
+use crate::model::onnx::layers::conv2d;
 use crate::util::tensor::to_host;
 
 /// What the exported file looks like beyond the weights.
@@ -38,41 +38,6 @@ pub struct OnnxExportOptions {
     /// COCO category id of each class (chicktrain's own metadata entry, so that
     /// `predict --onnx` writes the checkpoint's ids).
     pub category_ids: Vec<u64>,
-}
-
-/// Padding of a conv that pads the same on every side.
-fn symmetric_padding(conv: &Conv2d, scope: &str) -> Result<[usize; 2]> {
-    let [_, _, kh, kw] = conv.weight.dims();
-    Ok(match &conv.padding {
-        PaddingConfig2d::Valid => [0, 0],
-        PaddingConfig2d::Explicit(t, l, b, r) if t == b && l == r => [*t, *l],
-        PaddingConfig2d::Same if kh % 2 == 1 && kw % 2 == 1 && conv.stride == [1, 1] => {
-            [kh / 2, kw / 2]
-        }
-        p => bail!("{scope}: padding {p:?} has no symmetric ONNX equivalent"),
-    })
-}
-
-/// A plain `Conv2d` (with its bias if it has one).
-fn conv2d(g: &mut GraphBuilder, scope: &str, x: &str, conv: &Conv2d) -> Result<String> {
-    ensure!(
-        conv.dilation == [1, 1],
-        "{scope}: dilated convs are not exported (dilation {:?})",
-        conv.dilation
-    );
-    let pad = symmetric_padding(conv, scope)?;
-    let dims = conv.weight.dims();
-    let w = to_host(conv.weight.val());
-    let b = conv.bias.as_ref().map(|b| to_host(b.val()));
-    Ok(g.conv(
-        scope,
-        x,
-        (&dims, &w),
-        b.as_deref(),
-        conv.stride,
-        pad,
-        conv.groups,
-    ))
 }
 
 /// ultralytics `Conv` after `fuse()`: conv with the folded bias, then SiLU.
