@@ -14,7 +14,7 @@ use anyhow::{bail, Context, Result};
 
 use super::{
     encode_sample, render_sample, ImageFormat, InstanceLabel, RenderOptions, RenderedSample,
-    Timings, RENDERER_VERSION,
+    Timings, RANDOMIZE_VERSION, RENDERER_VERSION,
 };
 use crate::util::hash::{fnv, mix64, FNV_OFFSET};
 
@@ -33,7 +33,15 @@ pub fn cache_key(opts: &RenderOptions, seed: u64) -> Result<String> {
     let mut o = opts.clone();
     o.count = 0;
     o.seed = 0;
-    let text = format!("{RENDERER_VERSION}\n{}\n{seed}", serde_json::to_string(&o)?);
+    // Renders with randomisation groups on carry the groups' version too: caches written
+    // before the groups drew anything (same options, base-look pixels) must not be reused.
+    // The base look keeps its old key.
+    let version = if o.randomize.is_off() {
+        RENDERER_VERSION.to_string()
+    } else {
+        format!("{RENDERER_VERSION}+{RANDOMIZE_VERSION}")
+    };
+    let text = format!("{version}\n{}\n{seed}", serde_json::to_string(&o)?);
     let mut h = fnv(FNV_OFFSET, text.as_bytes());
     if let Some(path) = &opts.carcass {
         let bytes = std::fs::read(path)
@@ -206,5 +214,34 @@ mod tests {
         assert_eq!(effective_seed(5, 1, false), 5);
         assert_ne!(cache_key(&o, 5).unwrap(), cache_key(&o, 6).unwrap());
         let _ = std::fs::remove_dir_all(&root);
+    }
+}
+
+#[cfg(test)]
+mod key_tests {
+    use super::*;
+    use crate::render::randomize::Randomize;
+
+    /// A render with groups on must not reuse a cache written when the groups drew
+    /// nothing (same options, base-look pixels), and the base look keeps its key.
+    #[test]
+    fn randomised_renders_carry_the_groups_version_in_their_key() {
+        let mut o = RenderOptions::synthetic(64);
+        let base = cache_key(&o, 3).unwrap();
+        let legacy = |o: &RenderOptions| {
+            let mut c = o.clone();
+            c.count = 0;
+            c.seed = 0;
+            let text = format!(
+                "{RENDERER_VERSION}\n{}\n3",
+                serde_json::to_string(&c).unwrap()
+            );
+            format!("{:016x}", mix64(fnv(FNV_OFFSET, text.as_bytes())))
+        };
+        assert_eq!(base, legacy(&o));
+        o.randomize = Randomize::ALL;
+        let on = cache_key(&o, 3).unwrap();
+        assert_ne!(on, base);
+        assert_ne!(on, legacy(&o));
     }
 }

@@ -61,6 +61,9 @@ pub use preset::{ImageFormat, RenderOptions};
 
 /// Bumped whenever output for a given (options, seed, index) changes; part of cache keys.
 pub const RENDERER_VERSION: &str = "chicktrain-render-1";
+/// Version of what the randomisation groups draw; part of the cache key of every render
+/// with a group on (bump it when a group's ranges or sampling change).
+pub const RANDOMIZE_VERSION: &str = "randomize-1";
 
 /// Where the time of one image went.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
