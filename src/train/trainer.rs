@@ -27,7 +27,7 @@ use super::detector::DetectorConfig;
 use super::device::device_of;
 use super::divergence::{check_weights, At, DivergenceGuard};
 use super::evaluate::evaluate_ids;
-use super::loader::{epoch_plan, mix, Loader};
+use super::loader::{epoch_batches, mix, Loader, Mix};
 use super::run_files::{self, EpochRecord, StatsRecord, TestRecord};
 use super::schedule::step_lr;
 use super::smoke::smoke_config;
@@ -61,6 +61,8 @@ pub struct TrainSummary {
     pub proxy: bool,
     pub seconds: f64,
     pub train_images_per_s: f64,
+    /// Optimiser steps over all epochs (resumed ones included): what equal compute means.
+    pub steps: usize,
 }
 
 /// The config as it will run (`--smoke`, `--device` applied) and its run folder, created.
@@ -219,11 +221,10 @@ impl Run<'_> {
         } else {
             None
         };
-        let n_items = self.split.train.len() + cfg.data.synthetic;
         let n = steps.steps.max(1) as f64;
         st.records.push(EpochRecord {
             epoch: epoch + 1,
-            images_per_s: (steps.steps * cfg.train.batch).min(n_items) as f64 / t_train.max(1e-9),
+            images_per_s: steps.images as f64 / t_train.max(1e-9),
             loss: loss_names
                 .iter()
                 .zip(&steps.sums)
@@ -231,6 +232,7 @@ impl Run<'_> {
                 .collect(),
             lr: steps.last_lr,
             proxy: self.real.proxy,
+            steps: steps.steps,
             time: te.elapsed().as_secs_f64(),
             train_time: t_train,
             val: val.as_ref().map(StatsRecord::from),
@@ -282,8 +284,11 @@ fn run_epoch(
 ) -> Result<EpochSteps> {
     let te = Instant::now();
     let bsz = cfg.train.batch;
-    let per_epoch = (train_ids.len() + cfg.data.synthetic).div_ceil(bsz);
-    let plan = epoch_plan(train_ids, cfg.data.synthetic, cfg.seed, epoch);
+    let m = Mix::of(&cfg.train);
+    // The LR schedule counts warmup in these steps, so it stays in epochs whatever
+    // `train.steps_per_epoch` is.
+    let per_epoch = m.steps(train_ids.len(), cfg.data.synthetic, bsz);
+    let plan = epoch_batches(train_ids, cfg.data.synthetic, cfg.seed, epoch, bsz, m)?;
     let bar = if quiet {
         indicatif::ProgressBar::hidden()
     } else {
@@ -442,9 +447,13 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         real: real.clone(),
         synthetic,
         aug: AugmentConfig {
-            crop: cfg.data.crop,
-            fliplr: cfg.train.fliplr,
-            hsv: cfg.train.hsv,
+            degrees: cfg.train.degrees,
+            scale: cfg.train.scale,
+            translate: cfg.train.translate,
+            flipud: cfg.train.flipud,
+            mosaic: cfg.train.mosaic,
+            copy_paste: cfg.train.copy_paste,
+            ..AugmentConfig::basic(cfg.data.crop, cfg.train.fliplr, cfg.train.hsv)
         },
         input: input as u32,
         seed: cfg.seed,
@@ -486,6 +495,7 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         proxy: real.proxy,
         seconds: t_start.elapsed().as_secs_f64(),
         train_images_per_s: train_imgs as f64 / train_secs.max(1e-9),
+        steps: st.records.iter().map(|r| r.steps).sum(),
     })
 }
 
@@ -651,6 +661,7 @@ mod tests {
             loss: [("box".to_string(), 1.25), ("seg".to_string(), 0.5)].into(),
             lr: 0.01,
             proxy: true,
+            steps: 4,
             time: 12.0,
             train_time: 10.0,
             val: Some(StatsRecord {
