@@ -86,24 +86,24 @@ pub struct TrainConfig {
     pub real_fraction: Option<f64>,
     /// Rotation uniform in ±degrees (ultralytics' `degrees`; a pile seen from above has
     /// no up, 180 = any angle). 0 = off.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub degrees: f64,
     /// Scale jitter uniform in 1 ± scale (ultralytics' `scale`). 0 = off.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub scale: f64,
     /// Shift uniform in ±translate of the image size (ultralytics' `translate`). 0 = off.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub translate: f64,
     /// Vertical flip probability (ultralytics' `flipud`). 0 = off.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub flipud: f64,
     /// Probability of a 2×2 mosaic of four samples, cropped to the training size
     /// (ultralytics' `mosaic`). 0 = off.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub mosaic: f64,
     /// Probability per image of pasting instances of another sample on top (ultralytics'
     /// `copy_paste`, Ghiasi et al. 2021). 0 = off.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub copy_paste: f64,
 }
 
@@ -255,6 +255,12 @@ impl TrainConfig {
         }
         Ok(())
     }
+}
+
+/// Augmentation keys at 0 (off) are left out of resolved configs and checkpoint
+/// headers, which then read as before these keys existed.
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 fn default_true() -> bool {
