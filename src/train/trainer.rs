@@ -417,6 +417,20 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         t0.elapsed().as_secs_f64()
     ));
 
+    let m = Mix::of(&cfg.train);
+    say(format!(
+        "plan: {} optimiser steps per epoch of batch {}{}",
+        m.steps(split.train.len(), cfg.data.synthetic, cfg.train.batch),
+        cfg.train.batch,
+        match m.real_fraction {
+            Some(f) => format!(
+                ", {} real per batch (train.real_fraction = {f})",
+                (f * cfg.train.batch as f64).round()
+            ),
+            None => ", real and synthetic in their natural proportion".into(),
+        }
+    ));
+
     let base = device_of(cfg.device)?;
     base.seed(cfg.seed);
     let ad = base.clone().autodiff();
