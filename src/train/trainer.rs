@@ -666,6 +666,41 @@ mod tests {
     }
 
     #[test]
+    fn steps_per_epoch_and_real_fraction_fix_the_compute_with_every_augmentation_on() {
+        // 4 proxy images (2 train) + 3 renders; 3 steps of 1 real + 1 synthetic per
+        // epoch whatever the counts, through mosaic, copy-paste, the warp and flipud.
+        let dir = tmp("mix");
+        let cfg = tiny(
+            &dir,
+            &[
+                "data.synthetic=3",
+                "train.epochs=2",
+                "train.batch=2",
+                "train.val_every=2",
+                "train.steps_per_epoch=3",
+                "train.real_fraction=0.5",
+                "train.degrees=180",
+                "train.scale=0.3",
+                "train.translate=0.1",
+                "train.flipud=0.5",
+                "train.mosaic=1.0",
+                "train.copy_paste=0.5",
+            ],
+        );
+        let opts = TrainOptions {
+            run_dir: Some(dir.join("run")),
+            quiet: true,
+            ..Default::default()
+        };
+        let s = train(cfg, &opts).unwrap();
+        assert_eq!(s.steps, 6);
+        let recs = run_files::read_metrics(&dir.join("run"), 9).unwrap();
+        assert_eq!(recs.iter().map(|r| r.steps).collect::<Vec<_>>(), [3, 3]);
+        assert_eq!(run_files::total_steps(&dir.join("run")).unwrap(), 6);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn epoch_line_reports_every_term_and_the_best_mark() {
         let mut segm = [0.0; 12];
         segm[..2].copy_from_slice(&[0.5, 0.75]);
