@@ -328,6 +328,36 @@ enum BenchWhat {
         #[arg(long)]
         quiet: bool,
     },
+    /// Transfer ablation: train the base config and one variant per randomisation group
+    /// and per augmentation turned off, N seeds each at the same optimiser steps, score
+    /// every best.bpk on an external set, report mean ± std (runs/transfer/<config name>/).
+    Transfer {
+        #[arg(long)]
+        config: String,
+        /// Data config of the set to score on, every image test (e.g.
+        /// bench/crossdomain/crossdomain.toml).
+        #[arg(long)]
+        data_eval: String,
+        /// Seeds per variant (config seed, seed + 1, …).
+        #[arg(long, default_value_t = 1)]
+        seeds: usize,
+        /// Comma-separated subset, e.g. base,no-lighting,no-mosaic (default: all of
+        /// base, no-<group> per randomisation group on, no-<aug> per augmentation on).
+        #[arg(long)]
+        variants: Option<String>,
+        /// Override a config key in every run (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Never train: score and report the finished runs, name the missing ones.
+        #[arg(long)]
+        no_train: bool,
+        #[arg(long)]
+        device: Option<DeviceKind>,
+        #[arg(long)]
+        quiet: bool,
+    },
     /// One (variant, size) measurement as a JSON line (what `bench models` runs per row).
     #[command(hide = true)]
     ModelWorker {
@@ -451,6 +481,27 @@ impl BenchWhat {
                 train_only,
                 no_train,
                 effort: effort.into(),
+                device,
+                quiet,
+            }),
+            BenchWhat::Transfer {
+                config,
+                data_eval,
+                seeds,
+                variants,
+                set,
+                out,
+                no_train,
+                device,
+                quiet,
+            } => bench_cmd::transfer_cmd(bench_cmd::TransferRequest {
+                config,
+                data_eval,
+                seeds,
+                variants,
+                overrides: set,
+                out,
+                no_train,
                 device,
                 quiet,
             }),

@@ -1,6 +1,7 @@
 //! Speed / accuracy measurements built on the rest of the crate: model variants × input
 //! sizes ([`models`]: parameters, GFLOPs, latency, training throughput, peak memory,
-//! checkpoint AP), the scene ablation ([`ablation`]) and flex vs tract inference latency
+//! checkpoint AP), the scene ablation ([`ablation`]), the randomisation / augmentation
+//! ablation scored on an external set ([`transfer`]) and flex vs tract inference latency
 //! ([`engines`]). Their parts: variant names
 //! ([`variant`]), one row's measurement ([`measure`]) in a fresh child process
 //! ([`worker`]), test AP of trained models ([`accuracy`]) and the CSV / markdown / PNG
@@ -14,5 +15,6 @@ pub mod engines;
 pub mod measure;
 pub mod models;
 pub mod report;
+pub mod transfer;
 pub mod variant;
 pub mod worker;

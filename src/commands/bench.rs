@@ -1,4 +1,4 @@
-//! The measurement commands: `bench models`, `bench ablation`, the hidden per-row
+//! The measurement commands: `bench models`, `bench ablation`, `bench transfer`, the hidden per-row
 //! `bench model-worker`, and the paper's experiment `sweep`. Defaults that depend on
 //! several flags at once (which grid, which folder) are decided here, not in `main`.
 
@@ -9,6 +9,7 @@ use anyhow::Result;
 use crate::bench::ablation::{ablation, AblationOptions};
 use crate::bench::measure::Effort;
 use crate::bench::models as bm;
+use crate::bench::transfer::{transfer, TransferOptions};
 use crate::bench::worker::worker;
 use crate::config::{self, DeviceKind};
 /// `chicktrain sweep` is the experiment itself: [`sweep`] over [`SweepOptions`], the
@@ -131,6 +132,47 @@ pub fn ablation_cmd(r: AblationRequest) -> Result<String> {
         effort: r.effort.over(Effort::default()),
         device: r.device,
         exe: this_exe()?,
+        quiet: r.quiet,
+    })
+}
+
+/// `bench transfer` as given on the command line.
+#[derive(Clone, Debug)]
+pub struct TransferRequest {
+    pub config: String,
+    pub data_eval: String,
+    pub seeds: usize,
+    /// Comma-separated variant names (None: all).
+    pub variants: Option<String>,
+    pub overrides: Vec<String>,
+    pub out: Option<PathBuf>,
+    pub no_train: bool,
+    pub device: Option<DeviceKind>,
+    pub quiet: bool,
+}
+
+/// `chicktrain bench transfer` (report in `runs/transfer/<config name>/` by default).
+pub fn transfer_cmd(r: TransferRequest) -> Result<String> {
+    let name = config::load(&r.config, &r.overrides)?.name;
+    transfer(&TransferOptions {
+        config: r.config,
+        data_eval: r.data_eval,
+        seeds: r.seeds,
+        only: r
+            .variants
+            .map(|v| {
+                v.split(',')
+                    .map(|s| s.trim().to_string())
+                    .filter(|s| !s.is_empty())
+                    .collect()
+            })
+            .unwrap_or_default(),
+        overrides: r.overrides,
+        out: r
+            .out
+            .unwrap_or_else(|| PathBuf::from("runs/transfer").join(name)),
+        no_train: r.no_train,
+        device: r.device,
         quiet: r.quiet,
     })
 }

@@ -37,9 +37,10 @@ pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -
     crate::train::interrupt::install();
     let s: TrainSummary = train(cfg, opts)?;
     Ok(format!(
-        "trained {} epochs in {:.1} s ({:.2} train img/s); best epoch {}; run files in {}\n\
+        "trained {} epochs ({} optimiser steps) in {:.1} s ({:.2} train img/s); best epoch {}; run files in {}\n\
          test split ({} images{}), best.bpk:\n{}\n{}",
         s.epochs,
+        s.steps,
         s.seconds,
         s.train_images_per_s,
         s.best_epoch,

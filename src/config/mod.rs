@@ -194,6 +194,22 @@ impl Config {
         self.data.validate()?;
         self.train.validate()?;
         self.model.validate(self.data.crop)?;
+        if let Some(f) = self.train.real_fraction {
+            let real = (f * self.train.batch as f64).round() as usize;
+            if real < self.train.batch && self.data.synthetic == 0 {
+                bail!(
+                    "train.real_fraction = {f} leaves {} of train.batch = {} places to synthetic images, but data.synthetic = 0 (set data.synthetic > 0, or train.real_fraction = 1)",
+                    self.train.batch - real,
+                    self.train.batch
+                );
+            }
+            if real > 0 && self.data.split[0] <= 0.0 {
+                bail!(
+                    "train.real_fraction = {f} needs real train images, but data.split = {:?} has no train part",
+                    self.data.split
+                );
+            }
+        }
         let (kind, max_freeze, stages) = match self.model.kind() {
             ModelKind::Yolo => ("yolo", 23, "ultralytics layer indices; 23 is the head"),
             ModelKind::Maskrcnn => (
@@ -251,6 +267,16 @@ mod tests {
                 base.to_string(),
                 vec!["train.epochs=-3".into()],
                 "epochs = -3",
+            ),
+            (
+                base.to_string(),
+                vec!["train.real_fraction=0.5".into(), "data.synthetic=0".into()],
+                "but data.synthetic = 0",
+            ),
+            (
+                base.to_string(),
+                vec!["train.mosaic=1.5".into()],
+                "train.mosaic = 1.5",
             ),
             (
                 base.to_string(),

@@ -79,6 +79,36 @@ pub struct TrainConfig {
     /// time there; `best.bpk` is chosen among the validated epochs only.
     #[serde(default = "default_val_every")]
     pub val_every: usize,
+    /// Optimiser steps per epoch (detectron2's MAX_ITER, per epoch); unset = every item
+    /// once, `ceil((real train + synthetic) / batch)`. Fixing it makes recipes with
+    /// different synthetic counts cost the same compute.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps_per_epoch: Option<usize>,
+    /// Share of real images in every batch, `round(real_fraction × batch)` of them (the
+    /// few real ones oversampled); unset = the natural proportion of the shuffled items.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub real_fraction: Option<f64>,
+    /// Rotation uniform in ±degrees (ultralytics' `degrees`; a pile seen from above has
+    /// no up, 180 = any angle). 0 = off.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub degrees: f64,
+    /// Scale jitter uniform in 1 ± scale (ultralytics' `scale`). 0 = off.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub scale: f64,
+    /// Shift uniform in ±translate of the image size (ultralytics' `translate`). 0 = off.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub translate: f64,
+    /// Vertical flip probability (ultralytics' `flipud`). 0 = off.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub flipud: f64,
+    /// Probability of a 2×2 mosaic of four samples, cropped to the training size
+    /// (ultralytics' `mosaic`). 0 = off.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub mosaic: f64,
+    /// Probability per image of pasting instances of another sample on top (ultralytics'
+    /// `copy_paste`, Ghiasi et al. 2021). 0 = off.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub copy_paste: f64,
 }
 
 fn default_epochs() -> usize {
@@ -186,11 +216,67 @@ impl TrainConfig {
         if t.hsv.iter().any(|v| !(0.0..=1.0).contains(v)) {
             bail!("train.hsv = {:?} must be three gains in [0, 1]", t.hsv);
         }
+        if t.steps_per_epoch == Some(0) {
+            bail!("train.steps_per_epoch = 0 must be at least 1 (or left out: every item once per epoch)");
+        }
+        if let Some(f) = t.real_fraction {
+            if !(0.0..=1.0).contains(&f) {
+                bail!("train.real_fraction = {f} must be in [0, 1] (the share of real images in a batch)");
+            }
+            let n = (f * t.batch as f64).round() as usize;
+            if f > 0.0 && n == 0 {
+                bail!(
+                    "train.real_fraction = {f} × train.batch = {} rounds to 0 real images per batch (raise it to at least {:.3}, or set 0 for synthetic only)",
+                    t.batch,
+                    0.5 / t.batch as f64
+                );
+            }
+            if f < 1.0 && n == t.batch {
+                bail!(
+                    "train.real_fraction = {f} × train.batch = {} rounds to a batch of only real images (lower it to at most {:.3}, or set 1 for real only)",
+                    t.batch,
+                    1.0 - 0.5 / t.batch as f64
+                );
+            }
+        }
+        if !(t.degrees.is_finite() && (0.0..=180.0).contains(&t.degrees)) {
+            bail!(
+                "train.degrees = {} must be in [0, 180] (180 = any angle)",
+                t.degrees
+            );
+        }
+        if !(0.0..1.0).contains(&t.scale) {
+            bail!(
+                "train.scale = {} must be in [0, 1) (scale jitter 1 ± scale)",
+                t.scale
+            );
+        }
+        if !(0.0..1.0).contains(&t.translate) {
+            bail!(
+                "train.translate = {} must be in [0, 1) (a fraction of the image size)",
+                t.translate
+            );
+        }
+        for (k, v) in [
+            ("train.flipud", t.flipud),
+            ("train.mosaic", t.mosaic),
+            ("train.copy_paste", t.copy_paste),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                bail!("{k} = {v} must be a probability in [0, 1]");
+            }
+        }
         if t.milestones.windows(2).any(|w| w[0] >= w[1]) {
             bail!("train.milestones = {:?} must be increasing", t.milestones);
         }
         Ok(())
     }
+}
+
+/// Augmentation keys at 0 (off) are left out of resolved configs and checkpoint
+/// headers, which then read as before these keys existed.
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 fn default_true() -> bool {
@@ -210,5 +296,53 @@ mod tests {
         let t: TrainConfig = toml::from_str("val_every = 0").unwrap();
         let e = t.validate().unwrap_err().to_string();
         assert!(e.contains("train.val_every must be at least 1"), "{e}");
+    }
+
+    #[test]
+    fn mix_and_augmentation_keys_default_off_and_are_range_checked() {
+        let t = TrainConfig::default();
+        assert_eq!((t.steps_per_epoch, t.real_fraction), (None, None));
+        assert_eq!(
+            [
+                t.degrees,
+                t.scale,
+                t.translate,
+                t.flipud,
+                t.mosaic,
+                t.copy_paste
+            ],
+            [0.0; 6]
+        );
+        // Unset keys are not written to a resolved config, so old run folders read the same.
+        let text = toml::to_string(&t).unwrap();
+        assert!(
+            !text.contains("steps_per_epoch") && !text.contains("real_fraction"),
+            "{text}"
+        );
+        let ok: TrainConfig = toml::from_str(
+            "steps_per_epoch = 50\nreal_fraction = 0.25\ndegrees = 180\nscale = 0.3\ntranslate = 0.1\nflipud = 0.5\nmosaic = 1.0\ncopy_paste = 0.3",
+        )
+        .unwrap();
+        ok.validate().unwrap();
+        for (text, needle) in [
+            ("steps_per_epoch = 0", "train.steps_per_epoch = 0"),
+            (
+                "real_fraction = 1.5",
+                "train.real_fraction = 1.5 must be in [0, 1]",
+            ),
+            ("real_fraction = 0.05", "rounds to 0 real images"),
+            ("real_fraction = 0.97", "only real images"),
+            ("degrees = 181", "train.degrees"),
+            ("scale = 1.0", "train.scale"),
+            ("translate = -0.1", "train.translate"),
+            ("flipud = 2", "train.flipud"),
+            ("mosaic = -1", "train.mosaic"),
+            ("copy_paste = 1.1", "train.copy_paste"),
+        ] {
+            let t: TrainConfig = toml::from_str(text).unwrap();
+            let e = t.validate().unwrap_err().to_string();
+            assert!(e.contains(needle), "{text}: {e}");
+        }
+        assert!(toml::from_str::<TrainConfig>("mosaics = 1").is_err());
     }
 }

@@ -1,21 +1,197 @@
-//! Training augmentation, as in the paper plus ultralytics' colour jitter: a random
-//! `crop × crop` window, horizontal flip with probability `fliplr`, and HSV gains drawn
-//! uniformly in `1 ± hsv[k]` (hue rotated, saturation and value scaled, like
-//! ultralytics' `augment_hsv`). Everything is drawn from the caller's RNG, so a run is
-//! reproducible given its seed. Instances that leave the crop are dropped.
+//! Training augmentation: the paper's random `crop × crop` window, horizontal flip with
+//! probability `fliplr` and ultralytics' HSV gains drawn uniformly in `1 ± hsv[k]` (hue
+//! rotated, saturation and value scaled, like `augment_hsv`) — plus, each off at 0, what
+//! a top view allows and ultralytics users expect: `copy_paste` ([`super::copy_paste`]),
+//! `mosaic` ([`super::mosaic`]), rotation by up to `degrees`, scale `1 ± scale` and
+//! `translate` as one affine warp ([`super::affine`]), and a vertical flip `flipud`.
+//!
+//! Order, as ultralytics' pipeline: copy-paste → mosaic → affine → crop → HSV → flips.
+//! Crop, horizontal flip and HSV draw from the caller's item RNG exactly as before the
+//! other augmentations existed; those draw from a second stream ([`augment_full`]'s
+//! `extra`), so a config with them all 0 trains bit for bit as it did. Instances that
+//! leave the crop are dropped; after a warp, mosaic or paste, those under
+//! [`MIN_INSTANCE_PX`] pixels too.
 
 use image::RgbImage;
 use rand::Rng;
 
+use super::affine::{warp, Affine};
+use super::copy_paste::copy_paste;
 use super::dataset::{Instance, Sample};
+use super::mosaic::mosaic;
 use crate::annotations::mask::Mask;
 
-/// What to apply.
+/// Instances with fewer visible pixels after a warp, mosaic or paste are dropped: a few
+/// pixels of a carcass is not a fair target (ultralytics' `box_candidates` does the same
+/// after `RandomPerspective`).
+pub const MIN_INSTANCE_PX: u64 = 4;
+
+/// What to apply (the `[train]` keys of the same names; `crop` is `data.crop`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AugmentConfig {
     pub crop: u32,
     pub fliplr: f64,
     pub hsv: [f64; 3],
+    /// Rotation uniform in ±`degrees`.
+    pub degrees: f64,
+    /// Scale uniform in `1 ± scale`.
+    pub scale: f64,
+    /// Shift uniform in ±`translate` of the image size, per axis.
+    pub translate: f64,
+    /// Vertical flip probability.
+    pub flipud: f64,
+    /// Probability of a 2×2 mosaic with three other items of the epoch.
+    pub mosaic: f64,
+    /// Probability of pasting instances of another item of the epoch.
+    pub copy_paste: f64,
+}
+
+impl AugmentConfig {
+    /// Crop, flip and colour jitter only (every other augmentation off).
+    pub fn basic(crop: u32, fliplr: f64, hsv: [f64; 3]) -> AugmentConfig {
+        AugmentConfig {
+            crop,
+            fliplr,
+            hsv,
+            degrees: 0.0,
+            scale: 0.0,
+            translate: 0.0,
+            flipud: 0.0,
+            mosaic: 0.0,
+            copy_paste: 0.0,
+        }
+    }
+
+    /// Whether anything beyond crop, horizontal flip and HSV is on.
+    pub fn extended(&self) -> bool {
+        self.warps() || self.flipud > 0.0 || self.copy_paste > 0.0
+    }
+
+    /// Whether the affine warp can be other than the identity.
+    fn warps(&self) -> bool {
+        self.degrees > 0.0 || self.scale > 0.0 || self.translate > 0.0 || self.mosaic > 0.0
+    }
+}
+
+/// The other items of the epoch (positions in its plan) that one item's augmentation
+/// reads: drawn from the item's `extra` stream, so they depend only on the item's key.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Partners {
+    pub copy_paste: Option<usize>,
+    /// Up to three positions (fewer when the plan is shorter): the mosaic's other tiles.
+    pub mosaic: Option<Vec<usize>>,
+}
+
+/// `k` distinct positions of `0..len` other than `pos` (all of them when fewer exist).
+fn others<R: Rng>(rng: &mut R, pos: usize, len: usize, k: usize) -> Vec<usize> {
+    let n = len.saturating_sub(1);
+    rand::seq::index::sample(rng, n, k.min(n))
+        .into_iter()
+        .map(|i| if i >= pos { i + 1 } else { i })
+        .collect()
+}
+
+/// Whether copy-paste and mosaic apply to the item at `pos` of a `len`-item plan, and
+/// with which partners. Draws nothing for an augmentation that is off.
+pub fn draw_partners<R: Rng>(
+    cfg: &AugmentConfig,
+    extra: &mut R,
+    pos: usize,
+    len: usize,
+) -> Partners {
+    let mut p = Partners::default();
+    if cfg.copy_paste > 0.0 && extra.random::<f64>() < cfg.copy_paste {
+        p.copy_paste = others(extra, pos, len, 1).first().copied();
+    }
+    if cfg.mosaic > 0.0 && extra.random::<f64>() < cfg.mosaic {
+        p.mosaic = Some(others(extra, pos, len, 3));
+    }
+    p
+}
+
+/// The samples [`Partners`] named, loaded.
+#[derive(Default)]
+pub struct PartnerSamples<'a> {
+    pub copy_paste: Option<&'a Sample>,
+    pub mosaic: Option<Vec<&'a Sample>>,
+}
+
+/// The whole pipeline: copy-paste from `partners.copy_paste`, a mosaic with
+/// `partners.mosaic`, the affine warp and the vertical flip draw from `extra`; crop,
+/// horizontal flip and HSV from `rng` through [`augment`].
+pub fn augment_full<R: Rng, E: Rng>(
+    s: &Sample,
+    partners: &PartnerSamples,
+    cfg: &AugmentConfig,
+    extra: &mut E,
+    rng: &mut R,
+) -> Sample {
+    let pasted;
+    let mut cur = s;
+    if let Some(src) = partners.copy_paste {
+        pasted = copy_paste(cur, src, extra, MIN_INSTANCE_PX);
+        cur = &pasted;
+    }
+    let (w, h) = cur.image.dimensions();
+    let tiled;
+    let mut from = (w, h);
+    if let Some(rest) = &partners.mosaic {
+        let centre = (
+            extra.random_range(w / 2..=w + w / 2),
+            extra.random_range(h / 2..=h + h / 2),
+        );
+        let mut tiles = vec![cur];
+        tiles.extend(rest.iter().copied());
+        tiled = mosaic(&tiles, (w, h), centre, MIN_INSTANCE_PX);
+        cur = &tiled;
+        from = (2 * w, 2 * h);
+    }
+    let warped;
+    if cfg.warps() {
+        let degrees = if cfg.degrees > 0.0 {
+            extra.random_range(-cfg.degrees..=cfg.degrees)
+        } else {
+            0.0
+        };
+        let scale = if cfg.scale > 0.0 {
+            extra.random_range(1.0 - cfg.scale..=1.0 + cfg.scale)
+        } else {
+            1.0
+        };
+        let shift = if cfg.translate > 0.0 {
+            (
+                extra.random_range(-cfg.translate..=cfg.translate) * w as f64,
+                extra.random_range(-cfg.translate..=cfg.translate) * h as f64,
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        let a = Affine::about_centre(from, (w, h), degrees, scale, shift);
+        warped = warp(cur, &a, (w, h), MIN_INSTANCE_PX);
+        cur = &warped;
+    }
+    let mut out = augment(cur, cfg, rng);
+    if cfg.extended() {
+        // The crop cuts too; below the threshold it is a sliver, not a target.
+        out.instances.retain(|i| i.mask.area() >= MIN_INSTANCE_PX);
+    }
+    if cfg.flipud > 0.0 && extra.random::<f64>() < cfg.flipud {
+        flip_vertical(&mut out);
+    }
+    out
+}
+
+/// Mirrors a sample top to bottom, image and masks.
+pub fn flip_vertical(s: &mut Sample) {
+    image::imageops::flip_vertical_in_place(&mut s.image);
+    for inst in &mut s.instances {
+        let w = inst.mask.width as usize;
+        let h = inst.mask.height as usize;
+        for y in 0..h / 2 {
+            let (top, bottom) = inst.mask.data.split_at_mut((h - 1 - y) * w);
+            top[y * w..(y + 1) * w].swap_with_slice(&mut bottom[..w]);
+        }
+    }
 }
 
 /// Crop, flip and colour-jitter one sample.
@@ -158,11 +334,7 @@ mod tests {
     #[test]
     fn flip_only_mirrors_image_and_masks() {
         let s = sample();
-        let cfg = AugmentConfig {
-            crop: 8,
-            fliplr: 1.0,
-            hsv: [0.0; 3],
-        };
+        let cfg = AugmentConfig::basic(8, 1.0, [0.0; 3]);
         let a = augment(&s, &cfg, &mut ChaCha8Rng::seed_from_u64(1));
         assert_eq!(a.image.get_pixel(7, 3), s.image.get_pixel(0, 3));
         assert!(a.instances[0].mask.get(7, 0) && a.instances[0].mask.get(6, 0));
@@ -172,11 +344,7 @@ mod tests {
     #[test]
     fn crop_drops_instances_outside_and_is_seeded() {
         let s = sample();
-        let cfg = AugmentConfig {
-            crop: 4,
-            fliplr: 0.0,
-            hsv: [0.015, 0.7, 0.4],
-        };
+        let cfg = AugmentConfig::basic(4, 0.0, [0.015, 0.7, 0.4]);
         let mut kept = [0usize; 3];
         for seed in 0..40 {
             let a = augment(&s, &cfg, &mut ChaCha8Rng::seed_from_u64(seed));
@@ -191,5 +359,269 @@ mod tests {
         // The two instances sit in opposite corners of 8×8: a 4×4 crop never holds both.
         assert_eq!(kept[2], 0);
         assert!(kept[1] > 0 && kept[0] > 0, "{kept:?}");
+    }
+
+    /// A `size²` sample on background `bg` with one instance per rectangle
+    /// `(x0, y0, x1, y1)`, painted in its own grey level `c0 + 20 k` (class = colour).
+    fn painted(size: u32, bg: u8, c0: u8, rects: &[(u32, u32, u32, u32)]) -> Sample {
+        let mut image = RgbImage::from_pixel(size, size, image::Rgb([bg, 0, 0]));
+        let mut instances = Vec::new();
+        for (k, &(x0, y0, x1, y1)) in rects.iter().enumerate() {
+            let c = c0 + 20 * k as u8;
+            let mut m = Mask::new(size, size);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    m.set(x, y, true);
+                    image.put_pixel(x, y, image::Rgb([c, 0, 0]));
+                }
+            }
+            instances.push(Instance {
+                class: c as usize,
+                mask: m,
+            });
+        }
+        Sample { image, instances }
+    }
+
+    /// Each instance's mask covers the pixels of its colour: pixels deep inside a mask
+    /// (the `(2r + 1)²` neighbourhood in it) have exactly that colour, and pixels deep
+    /// inside a region of that colour are in the mask; only an `r`-px rim may blend.
+    /// `r = 1` holds for rectangles under rotation and flips (the bilinear taps lie
+    /// within one pixel per axis), `r = 2` under upscaling by up to 1.3. Returns how many
+    /// deep mask pixels it checked.
+    fn assert_aligned(s: &Sample, what: &str, r: i64) -> usize {
+        let (w, h) = s.image.dimensions();
+        let deep = |f: &dyn Fn(u32, u32) -> bool, x: u32, y: u32| {
+            (-r..=r).all(|dy| {
+                (-r..=r).all(|dx| {
+                    let (u, v) = (x as i64 + dx, y as i64 + dy);
+                    u >= 0 && v >= 0 && u < w as i64 && v < h as i64 && f(u as u32, v as u32)
+                })
+            })
+        };
+        let mut inside = 0;
+        for inst in &s.instances {
+            let c = inst.class as u8;
+            // Mosaic and copy-paste may bring in two copies of one sample's instance.
+            let in_some = |u: u32, v: u32| {
+                s.instances
+                    .iter()
+                    .any(|j| j.class == inst.class && j.mask.get(u, v))
+            };
+
+            for y in 0..h {
+                for x in 0..w {
+                    if deep(&|u, v| inst.mask.get(u, v), x, y) {
+                        inside += 1;
+                        assert_eq!(
+                            s.image.get_pixel(x, y).0[0],
+                            c,
+                            "{what}: class {c} at ({x},{y})"
+                        );
+                    }
+                    if deep(&|u, v| s.image.get_pixel(u, v).0 == [c, 0, 0], x, y) {
+                        assert!(
+                            in_some(x, y),
+                            "{what}: colour {c} outside its mask at ({x},{y})"
+                        );
+                    }
+                }
+            }
+        }
+        inside
+    }
+
+    #[test]
+    fn the_alignment_check_catches_a_shifted_mask() {
+        let a = painted(32, 5, 30, &[(4, 4, 20, 20)]);
+        assert!(assert_aligned(&a, "painted", 1) > 0);
+        // Shifted by r + 1 pixels, the rim tolerance no longer covers it.
+        for r in [1, 2] {
+            let mut bad = a.clone();
+            let m = &mut bad.instances[0].mask;
+            *m = Mask::new(32, 32);
+            for y in 4..20 {
+                for x in 4 + r as u32 + 1..20 + r as u32 + 1 {
+                    m.set(x, y, true);
+                }
+            }
+            assert!(std::panic::catch_unwind(|| assert_aligned(&bad, "shifted", r)).is_err());
+        }
+    }
+
+    fn full(crop: u32) -> AugmentConfig {
+        AugmentConfig {
+            degrees: 180.0,
+            scale: 0.3,
+            translate: 0.1,
+            flipud: 0.5,
+            mosaic: 1.0,
+            copy_paste: 1.0,
+            ..AugmentConfig::basic(crop, 0.5, [0.0; 3])
+        }
+    }
+
+    #[test]
+    fn every_augmentation_keeps_masks_on_their_pixels() {
+        let a = painted(48, 5, 30, &[(4, 4, 16, 16), (18, 10, 40, 30)]);
+        let b = painted(48, 6, 90, &[(10, 20, 30, 44)]);
+        let c = painted(48, 7, 130, &[(0, 0, 24, 24)]);
+        let d = painted(48, 8, 170, &[(30, 2, 46, 46)]);
+        let mut kinds = [0usize; 4];
+        let mut checked = 0;
+        for seed in 0..12u64 {
+            for (name, r, cfg) in [
+                (
+                    "rotate",
+                    1,
+                    AugmentConfig {
+                        degrees: 180.0,
+                        ..AugmentConfig::basic(48, 0.0, [0.0; 3])
+                    },
+                ),
+                (
+                    "scale+translate",
+                    2,
+                    AugmentConfig {
+                        scale: 0.3,
+                        translate: 0.2,
+                        ..AugmentConfig::basic(40, 0.0, [0.0; 3])
+                    },
+                ),
+                (
+                    "flipud",
+                    1,
+                    AugmentConfig {
+                        flipud: 1.0,
+                        ..AugmentConfig::basic(48, 0.0, [0.0; 3])
+                    },
+                ),
+                ("all", 2, full(40)),
+            ] {
+                let mut extra = ChaCha8Rng::seed_from_u64(seed ^ 0x77);
+                let mut rng = ChaCha8Rng::seed_from_u64(seed);
+                let p = draw_partners(&cfg, &mut extra, 0, 4);
+                let pool = [&a, &b, &c, &d];
+                let ps = PartnerSamples {
+                    copy_paste: p.copy_paste.map(|q| pool[q]),
+                    mosaic: p
+                        .mosaic
+                        .as_ref()
+                        .map(|qs| qs.iter().map(|&q| pool[q]).collect()),
+                };
+                let out = augment_full(&a, &ps, &cfg, &mut extra, &mut rng);
+                assert_eq!(out.image.dimensions(), (cfg.crop, cfg.crop));
+                checked += assert_aligned(&out, &format!("{name} seed {seed}"), r);
+                for i in &out.instances {
+                    assert!(i.mask.area() >= MIN_INSTANCE_PX);
+                    kinds[[30, 50, 90, 130]
+                        .iter()
+                        .position(|&k| k == i.class)
+                        .unwrap_or(3)] += 1;
+                }
+            }
+        }
+        // Mosaic and copy-paste bring other samples' instances in.
+        assert!(kinds[2] > 0 && kinds[3] > 0, "{kinds:?}");
+        assert!(checked > 10_000, "only {checked} mask pixels checked");
+    }
+
+    #[test]
+    fn flipud_mirrors_rows_of_image_and_masks() {
+        let a = painted(6, 0, 30, &[(1, 0, 3, 2)]);
+        let mut f = a.clone();
+        flip_vertical(&mut f);
+        assert_eq!(f.image.get_pixel(1, 5), a.image.get_pixel(1, 0));
+        assert!(f.instances[0].mask.get(2, 4) && !f.instances[0].mask.get(2, 1));
+        flip_vertical(&mut f);
+        assert_eq!((f.image, f.instances), (a.image, a.instances));
+    }
+
+    #[test]
+    fn degenerate_inputs_give_valid_samples() {
+        let cfg = full(32);
+        let empty = painted(32, 5, 30, &[]);
+        let one = painted(32, 5, 30, &[(2, 2, 12, 12)]);
+        for seed in 0..8 {
+            let mut extra = ChaCha8Rng::seed_from_u64(seed);
+            let mut rng = ChaCha8Rng::seed_from_u64(seed + 100);
+            // No instances anywhere; a one-item plan has no partners at all.
+            let p = draw_partners(&cfg, &mut extra, 0, 1);
+            assert_eq!(p.copy_paste, None);
+            assert_eq!(p.mosaic, Some(vec![]));
+            let ps = PartnerSamples {
+                copy_paste: None,
+                mosaic: Some(vec![]),
+            };
+            let out = augment_full(&empty, &ps, &cfg, &mut extra, &mut rng);
+            assert_eq!(out.image.dimensions(), (32, 32));
+            assert!(out.instances.is_empty());
+            // A mosaic of two, copy-paste from a sample without instances.
+            let ps = PartnerSamples {
+                copy_paste: Some(&empty),
+                mosaic: Some(vec![&one]),
+            };
+            let out = augment_full(&one, &ps, &cfg, &mut extra, &mut rng);
+            assert_eq!(out.image.dimensions(), (32, 32));
+            assert!(out.instances.len() <= 2);
+            let _ = assert_aligned(&out, "two-tile mosaic", 2);
+        }
+        // Everything shifted out of the frame: no instances, a grey image.
+        let cfg = AugmentConfig {
+            translate: 0.99,
+            ..AugmentConfig::basic(32, 0.0, [0.0; 3])
+        };
+        let mut left = 0;
+        for seed in 0..40 {
+            let out = augment_full(
+                &one,
+                &PartnerSamples::default(),
+                &cfg,
+                &mut ChaCha8Rng::seed_from_u64(seed),
+                &mut ChaCha8Rng::seed_from_u64(seed),
+            );
+            left += out.instances.is_empty() as usize;
+            let _ = assert_aligned(&out, "translated", 1);
+        }
+        assert!(left > 0);
+    }
+
+    #[test]
+    fn the_pipeline_is_a_function_of_the_key_and_off_means_the_old_path() {
+        let a = painted(32, 5, 30, &[(2, 2, 20, 12), (10, 14, 30, 30)]);
+        let b = painted(32, 6, 90, &[(0, 0, 16, 16)]);
+        let cfg = full(24);
+        let run = |seed: u64| {
+            let mut extra = ChaCha8Rng::seed_from_u64(seed ^ 1);
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let p = draw_partners(&cfg, &mut extra, 2, 5);
+            assert!(p.copy_paste != Some(2) && !p.mosaic.as_ref().unwrap().contains(&2));
+            let ps = PartnerSamples {
+                copy_paste: Some(&b),
+                mosaic: Some(vec![&b, &a, &b]),
+            };
+            (p, augment_full(&a, &ps, &cfg, &mut extra, &mut rng))
+        };
+        let (p1, s1) = run(9);
+        let (p2, s2) = run(9);
+        assert_eq!(p1, p2);
+        assert_eq!((s1.image, s1.instances), (s2.image, s2.instances));
+        assert_ne!(run(10).1.image, run(9).1.image);
+        // With every new key 0 the pipeline is `augment` on the same stream, and the
+        // second stream is never read.
+        let basic = AugmentConfig::basic(24, 0.5, [0.015, 0.7, 0.4]);
+        assert!(!basic.extended());
+        let mut extra = ChaCha8Rng::seed_from_u64(3);
+        let before = extra.clone();
+        let got = augment_full(
+            &a,
+            &PartnerSamples::default(),
+            &basic,
+            &mut extra,
+            &mut ChaCha8Rng::seed_from_u64(4),
+        );
+        let want = augment(&a, &basic, &mut ChaCha8Rng::seed_from_u64(4));
+        assert_eq!((got.image, got.instances), (want.image, want.instances));
+        assert_eq!(extra, before);
     }
 }

@@ -89,6 +89,7 @@ mod tests {
                     .into(),
                     lr: 0.01,
                     proxy: true,
+                    steps: 2,
                     time: 1.0,
                     train_time: 1.0,
                     // Epoch 2 was not validated (train.val_every = 2 would skip 1 and 3;

@@ -55,6 +55,9 @@ pub struct EpochRecord {
     /// True when the "real" images are proxy-real renders.
     #[serde(default)]
     pub proxy: bool,
+    /// Optimiser steps of the epoch (0 in files written before it was recorded).
+    #[serde(default)]
+    pub steps: usize,
     /// Seconds for the epoch, validation included.
     pub time: f64,
     /// Seconds of training steps alone.
@@ -189,6 +192,11 @@ pub fn read_test(dir: &Path) -> Result<TestRecord> {
     serde_json::from_str(&text).with_context(|| format!("{} is not a test record", p.display()))
 }
 
+/// Optimiser steps of all epochs in `<dir>/metrics.jsonl` (0 when the file is missing).
+pub fn total_steps(dir: &Path) -> Result<usize> {
+    Ok(read_metrics(dir, usize::MAX)?.iter().map(|r| r.steps).sum())
+}
+
 /// Seconds of all epochs in `<dir>/metrics.jsonl` (0 when the file is missing).
 pub fn train_seconds(dir: &Path) -> Result<f64> {
     Ok(read_metrics(dir, usize::MAX)?.iter().map(|r| r.time).sum())
@@ -222,6 +230,7 @@ mod tests {
             loss: [("box".to_string(), 1.5), ("seg".to_string(), 0.1)].into(),
             lr: 0.01,
             proxy: true,
+            steps: 7,
             time: 12.0,
             train_time: 10.0,
             val: Some(StatsRecord {
@@ -239,7 +248,7 @@ mod tests {
         let (bbox, segm) = (v.bbox.stats, v.segm.stats);
         let untyped = serde_json::json!({
             "epoch": 3, "lr": 0.01, "time": 12.0, "train_time": 10.0, "images_per_s": 6.5,
-            "loss": {"seg": 0.1, "box": 1.5}, "proxy": true,
+            "loss": {"seg": 0.1, "box": 1.5}, "proxy": true, "steps": 7,
             "val": {"bbox": {"stats": bbox}, "segm": {"stats": segm}},
         });
         assert_eq!(json(&r), serde_json::to_string(&untyped).unwrap());
@@ -272,6 +281,7 @@ mod tests {
         assert_eq!(best_epoch(&recs), 2);
         assert_eq!(best_epoch(&[]), 0);
         assert_eq!(train_seconds(&dir).unwrap(), 36.0);
+        assert_eq!(total_steps(&dir).unwrap(), 21);
         let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
         let lines: Vec<&str> = csv.lines().collect();
         assert!(lines[0].starts_with(

@@ -2,7 +2,8 @@
 
 use crate::config::{Config, ModelConfig};
 
-/// 64 px images (no crop), at most 9 real and 4 synthetic images, 2 epochs, batch 4.
+/// 64 px images (no crop), at most 9 real and 4 synthetic images, 2 epochs (of at
+/// most 3 steps when `train.steps_per_epoch` is set), batch 4.
 /// A Mask R-CNN keeps its depth (so the R101 code paths run) but gets quarter widths,
 /// anchors sized for 64 px and a few dozen proposals and RoIs. A Mask2Former keeps its
 /// depth, gets quarter widths, a 32-wide 3-layer decoder, ≤ 10 queries and 256 points.
@@ -16,6 +17,7 @@ pub fn smoke_config(cfg: &mut Config) {
     d.synthetic = d.synthetic.min(4);
     let t = &mut cfg.train;
     t.epochs = t.epochs.min(2);
+    t.steps_per_epoch = t.steps_per_epoch.map(|n| n.min(3));
     t.batch = t.batch.min(4);
     t.warmup_epochs = t.warmup_epochs.min(1.0);
     t.warmup_iters = t.warmup_iters.min(2);

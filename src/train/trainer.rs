@@ -27,7 +27,7 @@ use super::detector::DetectorConfig;
 use super::device::device_of;
 use super::divergence::{check_weights, At, DivergenceGuard};
 use super::evaluate::evaluate_ids;
-use super::loader::{epoch_plan, mix, Loader};
+use super::loader::{epoch_batches, mix, Loader, Mix};
 use super::run_files::{self, EpochRecord, StatsRecord, TestRecord};
 use super::schedule::step_lr;
 use super::smoke::smoke_config;
@@ -61,6 +61,8 @@ pub struct TrainSummary {
     pub proxy: bool,
     pub seconds: f64,
     pub train_images_per_s: f64,
+    /// Optimiser steps over all epochs (resumed ones included): what equal compute means.
+    pub steps: usize,
 }
 
 /// The config as it will run (`--smoke`, `--device` applied) and its run folder, created.
@@ -219,11 +221,10 @@ impl Run<'_> {
         } else {
             None
         };
-        let n_items = self.split.train.len() + cfg.data.synthetic;
         let n = steps.steps.max(1) as f64;
         st.records.push(EpochRecord {
             epoch: epoch + 1,
-            images_per_s: (steps.steps * cfg.train.batch).min(n_items) as f64 / t_train.max(1e-9),
+            images_per_s: steps.images as f64 / t_train.max(1e-9),
             loss: loss_names
                 .iter()
                 .zip(&steps.sums)
@@ -231,6 +232,7 @@ impl Run<'_> {
                 .collect(),
             lr: steps.last_lr,
             proxy: self.real.proxy,
+            steps: steps.steps,
             time: te.elapsed().as_secs_f64(),
             train_time: t_train,
             val: val.as_ref().map(StatsRecord::from),
@@ -282,8 +284,11 @@ fn run_epoch(
 ) -> Result<EpochSteps> {
     let te = Instant::now();
     let bsz = cfg.train.batch;
-    let per_epoch = (train_ids.len() + cfg.data.synthetic).div_ceil(bsz);
-    let plan = epoch_plan(train_ids, cfg.data.synthetic, cfg.seed, epoch);
+    let m = Mix::of(&cfg.train);
+    // The LR schedule counts warmup in these steps, so it stays in epochs whatever
+    // `train.steps_per_epoch` is.
+    let per_epoch = m.steps(train_ids.len(), cfg.data.synthetic, bsz);
+    let plan = epoch_batches(train_ids, cfg.data.synthetic, cfg.seed, epoch, bsz, m)?;
     let bar = if quiet {
         indicatif::ProgressBar::hidden()
     } else {
@@ -412,6 +417,20 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         t0.elapsed().as_secs_f64()
     ));
 
+    let m = Mix::of(&cfg.train);
+    say(format!(
+        "plan: {} optimiser steps per epoch of batch {}{}",
+        m.steps(split.train.len(), cfg.data.synthetic, cfg.train.batch),
+        cfg.train.batch,
+        match m.real_fraction {
+            Some(f) => format!(
+                ", {} real per batch (train.real_fraction = {f})",
+                (f * cfg.train.batch as f64).round()
+            ),
+            None => ", real and synthetic in their natural proportion".into(),
+        }
+    ));
+
     let base = device_of(cfg.device)?;
     base.seed(cfg.seed);
     let ad = base.clone().autodiff();
@@ -442,9 +461,13 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         real: real.clone(),
         synthetic,
         aug: AugmentConfig {
-            crop: cfg.data.crop,
-            fliplr: cfg.train.fliplr,
-            hsv: cfg.train.hsv,
+            degrees: cfg.train.degrees,
+            scale: cfg.train.scale,
+            translate: cfg.train.translate,
+            flipud: cfg.train.flipud,
+            mosaic: cfg.train.mosaic,
+            copy_paste: cfg.train.copy_paste,
+            ..AugmentConfig::basic(cfg.data.crop, cfg.train.fliplr, cfg.train.hsv)
         },
         input: input as u32,
         seed: cfg.seed,
@@ -486,6 +509,7 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         proxy: real.proxy,
         seconds: t_start.elapsed().as_secs_f64(),
         train_images_per_s: train_imgs as f64 / train_secs.max(1e-9),
+        steps: st.records.iter().map(|r| r.steps).sum(),
     })
 }
 
@@ -642,6 +666,41 @@ mod tests {
     }
 
     #[test]
+    fn steps_per_epoch_and_real_fraction_fix_the_compute_with_every_augmentation_on() {
+        // 4 proxy images (2 train) + 3 renders; 3 steps of 1 real + 1 synthetic per
+        // epoch whatever the counts, through mosaic, copy-paste, the warp and flipud.
+        let dir = tmp("mix");
+        let cfg = tiny(
+            &dir,
+            &[
+                "data.synthetic=3",
+                "train.epochs=2",
+                "train.batch=2",
+                "train.val_every=2",
+                "train.steps_per_epoch=3",
+                "train.real_fraction=0.5",
+                "train.degrees=180",
+                "train.scale=0.3",
+                "train.translate=0.1",
+                "train.flipud=0.5",
+                "train.mosaic=1.0",
+                "train.copy_paste=0.5",
+            ],
+        );
+        let opts = TrainOptions {
+            run_dir: Some(dir.join("run")),
+            quiet: true,
+            ..Default::default()
+        };
+        let s = train(cfg, &opts).unwrap();
+        assert_eq!(s.steps, 6);
+        let recs = run_files::read_metrics(&dir.join("run"), 9).unwrap();
+        assert_eq!(recs.iter().map(|r| r.steps).collect::<Vec<_>>(), [3, 3]);
+        assert_eq!(run_files::total_steps(&dir.join("run")).unwrap(), 6);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn epoch_line_reports_every_term_and_the_best_mark() {
         let mut segm = [0.0; 12];
         segm[..2].copy_from_slice(&[0.5, 0.75]);
@@ -651,6 +710,7 @@ mod tests {
             loss: [("box".to_string(), 1.25), ("seg".to_string(), 0.5)].into(),
             lr: 0.01,
             proxy: true,
+            steps: 4,
             time: 12.0,
             train_time: 10.0,
             val: Some(StatsRecord {
