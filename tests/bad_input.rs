@@ -415,6 +415,7 @@ fn broken_images_meshes_and_checkpoints_exit_2_naming_the_file() {
     match &mut other.header.model {
         DetectorConfig::Yolo(c) => c.num_classes = 3,
         DetectorConfig::Maskrcnn(c) => c.num_classes = 3,
+        DetectorConfig::Mask2former(c) => c.num_classes = 3,
     }
     other.header.category_ids = vec![1, 2, 3];
     other.header.class_names = vec!["a".into(), "b".into(), "c".into()];

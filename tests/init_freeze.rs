@@ -30,6 +30,7 @@ fn tensors(ck: &Path, section: &str) -> HashMap<String, Vec<f32>> {
     let snaps = match m {
         Detector::Yolo(m) => collect(&m),
         Detector::MaskRcnn(m) => collect(&m),
+        Detector::Mask2Former(m) => collect(&m),
     };
     snaps
         .into_iter()

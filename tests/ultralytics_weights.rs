@@ -417,8 +417,14 @@ fn export_command_writes_the_ultralytics_state_dict() {
         "--format",
         "safetensors",
     ]);
-    common::assert_clean_error(&out, &["mrcnn.bpk", "Mask R-CNN", "not implemented yet"]);
-    assert!(!dir.join("mrcnn.safetensors").exists());
+    // Mask R-CNN exports under torchvision's names (tests/torchvision_import.rs checks
+    // the contents); here only that the shared command takes the other family.
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.join("mrcnn.safetensors").exists());
     let out = common::run(&[
         "export",
         "--checkpoint",

@@ -434,10 +434,14 @@ mod tests {
                 "no-camera",
                 "no-physics",
                 "no-fliplr",
-                "no-hsv"
+                "no-hsv",
+                "no-degrees",
+                "no-scale",
+                "no-flipud"
             ]
         );
         let ov: Vec<String> = [
+            "train.degrees=0",
             "train.mosaic=0.5",
             "train.copy_paste=0.3",
             "data.randomize.lighting=false",
@@ -468,7 +472,14 @@ mod tests {
         let r = config::load("quickstart.toml", &["data.synthetic=0".into()]).unwrap();
         assert_eq!(
             names(&variants(&r).unwrap()),
-            ["base", "no-fliplr", "no-hsv"]
+            [
+                "base",
+                "no-fliplr",
+                "no-hsv",
+                "no-degrees",
+                "no-scale",
+                "no-flipud"
+            ]
         );
     }
 

@@ -9,26 +9,40 @@
 use serde::{Deserialize, Serialize};
 
 /// On/off per randomisation group (`[data.randomize]` in a config).
+///
+/// A group a table leaves out is on (`[data.randomize]` with only `lighting = false` turns
+/// lighting off and keeps the other five), so one `--set data.randomize.X=false` turns
+/// exactly one group off. `Randomize::default()` is every group off (the base look).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(deny_unknown_fields)]
 pub struct Randomize {
     /// Body families, sizes, proportions, missing / cut parts, skin tone, fat, bruises,
     /// feather remnants, torn skin (stream "carcass").
+    #[serde(default = "on")]
     pub carcass: bool,
     /// Surfaces under the pile: steel plates, belts and crates of several colours, wet and
     /// dry, smears; empty scenes and piles cut by the frame (stream "scene").
+    #[serde(default = "on")]
     pub scene: bool,
     /// Non-carcass objects: gloves, hands, shackles, tools, water (stream "distractors").
+    #[serde(default = "on")]
     pub distractors: bool,
     /// Number, kind, colour temperature and hardness of lights, glare, exposure, white
     /// balance (stream "lighting").
+    #[serde(default = "on")]
     pub lighting: bool,
     /// Camera height, tilt, field of view, lens distortion, motion blur, sensor noise,
     /// JPEG quality (stream "camera").
+    #[serde(default = "on")]
     pub camera: bool,
     /// Piles dropped and settled by rigid-body physics (rapier3d) instead of the
     /// height-field drop (stream "physics").
+    #[serde(default = "on")]
     pub physics: bool,
+}
+
+fn on() -> bool {
+    true
 }
 
 impl Randomize {
@@ -108,6 +122,9 @@ mod tests {
         assert_eq!(Randomize::parse_list("all").unwrap(), Randomize::ALL);
         let two = Randomize::parse_list("physics, camera").unwrap();
         assert!(two.physics && two.camera && !two.lighting);
+        // A table that names one group leaves the others on.
+        let one: Randomize = toml::from_str("lighting = false").unwrap();
+        assert_eq!(one, Randomize::ALL.with("lighting", false).unwrap());
         assert!(Randomize::parse_list("physics,wind").is_err());
     }
 }
