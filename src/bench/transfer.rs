@@ -428,10 +428,6 @@ mod tests {
             [
                 "base",
                 "no-carcass",
-                "no-scene",
-                "no-distractors",
-                "no-lighting",
-                "no-camera",
                 "no-physics",
                 "no-fliplr",
                 "no-hsv",
@@ -444,7 +440,9 @@ mod tests {
             "train.degrees=0",
             "train.mosaic=0.5",
             "train.copy_paste=0.3",
-            "data.randomize.lighting=false",
+            "data.randomize.lighting=true",
+            "data.randomize.scene=true",
+            "data.randomize.carcass=false",
         ]
         .map(String::from)
         .to_vec();
@@ -452,7 +450,8 @@ mod tests {
         let v = variants(&c).unwrap();
         let n = names(&v);
         assert!(n.contains(&"no-mosaic") && n.contains(&"no-copy-paste"));
-        assert!(!n.contains(&"no-lighting") && !n.contains(&"no-degrees"));
+        assert!(n.contains(&"no-lighting") && n.contains(&"no-scene"));
+        assert!(!n.contains(&"no-carcass") && !n.contains(&"no-degrees"));
         // Every variant is a valid config and turns its key off.
         for x in &v {
             let mut set = ov.clone();
@@ -488,10 +487,10 @@ mod tests {
         let q = config::load("quickstart.toml", &[]).unwrap();
         let v = choose(
             variants(&q).unwrap(),
-            &["no-hsv".into(), "base".into(), "no-lighting".into()],
+            &["no-hsv".into(), "base".into(), "no-physics".into()],
         )
         .unwrap();
-        assert_eq!(names(&v), ["base", "no-lighting", "no-hsv"]);
+        assert_eq!(names(&v), ["base", "no-physics", "no-hsv"]);
         let e = choose(variants(&q).unwrap(), &["no-mosaic".into()])
             .unwrap_err()
             .to_string();

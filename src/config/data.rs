@@ -77,9 +77,9 @@ pub struct DataConfig {
     pub randomize: Randomize,
 }
 
-/// Every group on: a config renders the full randomised domain unless it turns groups off.
+/// The geometry groups on, the appearance groups opt-in (see `Randomize::TRAINING`).
 fn default_randomize() -> Randomize {
-    Randomize::ALL
+    Randomize::TRAINING
 }
 
 fn default_cache() -> PathBuf {
