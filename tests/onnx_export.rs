@@ -7,13 +7,75 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use chicktrain::annotations::rle::{rle_iou, Rle};
 use common::{assert_clean_error, assert_success, run, smoke_args, tmp};
+use serde_json::Value;
 
-fn results(dir: &Path) -> Vec<serde_json::Value> {
+fn results(dir: &Path) -> Vec<Value> {
     serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap()
+}
+
+/// Two rendered 160 px piles in `d/imgs` as predict input: real piles, not blank frames.
+fn render_inputs(d: &Path) -> PathBuf {
+    let imgs = d.join("imgs");
+    assert_success(&run(&[
+        "render",
+        "--out",
+        imgs.to_str().unwrap(),
+        "--count",
+        "2",
+        "--size",
+        "160",
+    ]));
+    imgs.join("images")
+}
+
+/// `predict` on `input` at `--conf conf` with the model given by `args`; its results.json.
+fn predict(input: &Path, args: &[&str], conf: &str, out: &Path) -> Vec<Value> {
+    let mut a = vec![
+        "predict",
+        "--input",
+        input.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--conf",
+        conf,
+    ];
+    a.extend_from_slice(args);
+    assert_success(&run(&a));
+    results(out)
+}
+
+/// A `--conf` between the first two of `dets`' scores more than 1e-3 apart. A smoke
+/// model's many low, near-tied scores make NMS order a coin toss between engines that
+/// differ by 1e-5, so the engines are compared above a clear gap in the checkpoint's own
+/// scores.
+fn conf_above_gap(dets: &[Value]) -> Option<String> {
+    let mut scores: Vec<f64> = dets.iter().map(|r| r["score"].as_f64().unwrap()).collect();
+    scores.sort_by(|a, b| b.total_cmp(a));
+    let gap = scores.windows(2).find(|w| w[0] - w[1] > 1e-3)?;
+    Some(format!("{}", (gap[0] + gap[1]) / 2.0))
+}
+
+/// The same detections in the same order: image, class, score within 1e-4, box within
+/// 0.05 px.
+fn assert_same_detections(a: &[Value], b: &[Value], conf: &str) {
+    assert_eq!(a.len(), b.len(), "at --conf {conf}");
+    for (a, b) in a.iter().zip(b) {
+        assert_eq!(a["image_id"], b["image_id"]);
+        assert_eq!(a["category_id"], b["category_id"]);
+        let (sa, sb) = (a["score"].as_f64().unwrap(), b["score"].as_f64().unwrap());
+        assert!((sa - sb).abs() < 1e-4, "score {sa} vs {sb}");
+        for k in 0..4 {
+            let (u, v) = (
+                a["bbox"][k].as_f64().unwrap(),
+                b["bbox"][k].as_f64().unwrap(),
+            );
+            assert!((u - v).abs() < 0.05, "bbox {} vs {}", a["bbox"], b["bbox"]);
+        }
+    }
 }
 
 #[test]
@@ -50,72 +112,24 @@ fn export_then_predict_with_tract_matches_checkpoint() {
         dynamic.to_str().unwrap(),
     ]));
 
-    // Rendered images of the smoke run's cache as input: real piles, not blank frames.
-    let imgs = d.join("imgs");
-    assert_success(&run(&[
-        "render",
-        "--out",
-        imgs.to_str().unwrap(),
-        "--count",
-        "2",
-        "--size",
-        "160",
-    ]));
-    let input = imgs.join("images");
-    let pred = |args: &[&str], conf: &str, out: &Path| {
-        let mut a = vec![
-            "predict",
-            "--input",
-            input.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--conf",
-            conf,
-        ];
-        a.extend_from_slice(args);
-        let o = run(&a);
-        assert_success(&o);
-        results(out)
-    };
-    // A smoke model's many low, near-tied scores make NMS order a coin toss between
-    // engines that differ by 1e-5, so compare above a clear gap in the checkpoint's
-    // own scores (the postprocess equivalence itself is a unit test in model::yolo::onnx).
-    let all = pred(&["--checkpoint", best_s], "0.001", &d.join("p_all"));
-    let mut scores: Vec<f64> = all.iter().map(|r| r["score"].as_f64().unwrap()).collect();
-    scores.sort_by(|a, b| b.total_cmp(a));
-    let gap = scores
-        .windows(2)
-        .find(|w| w[0] - w[1] > 1e-3)
-        .expect("the smoke model's scores have a gap above 1e-3");
-    let conf = format!("{}", (gap[0] + gap[1]) / 2.0);
-    let by_ck = pred(&["--checkpoint", best_s], &conf, &d.join("p_ck"));
-    let by_onnx = pred(
-        &["--onnx", onnx.to_str().unwrap()],
-        &conf,
-        &d.join("p_onnx"),
-    );
+    let input = render_inputs(&d);
+    let pred = |args: &[&str], conf: &str, out: &str| predict(&input, args, conf, &d.join(out));
+    // (The postprocess equivalence itself is a unit test in model::yolo::onnx.)
+    let all = pred(&["--checkpoint", best_s], "0.001", "p_all");
+    let conf = conf_above_gap(&all).expect("the smoke model's scores have a gap above 1e-3");
+    let by_ck = pred(&["--checkpoint", best_s], &conf, "p_ck");
+    let by_onnx = pred(&["--onnx", onnx.to_str().unwrap()], &conf, "p_onnx");
     let by_dyn = pred(
         &["--onnx", dynamic.to_str().unwrap(), "--threads", "1"],
         &conf,
-        &d.join("p_dyn"),
+        "p_dyn",
     );
     assert!(!by_ck.is_empty());
     for other in [&by_onnx, &by_dyn] {
-        assert_eq!(by_ck.len(), other.len(), "at --conf {conf}");
+        assert_same_detections(&by_ck, other, &conf);
+        // Masks: the same pixels, up to a few on the threshold (IoU > 0.99).
         for (a, b) in by_ck.iter().zip(other.iter()) {
-            assert_eq!(a["image_id"], b["image_id"]);
-            assert_eq!(a["category_id"], b["category_id"]);
-            let (sa, sb) = (a["score"].as_f64().unwrap(), b["score"].as_f64().unwrap());
-            assert!((sa - sb).abs() < 1e-4, "score {sa} vs {sb}");
-            for k in 0..4 {
-                let (u, v) = (
-                    a["bbox"][k].as_f64().unwrap(),
-                    b["bbox"][k].as_f64().unwrap(),
-                );
-                assert!((u - v).abs() < 0.05, "bbox {} vs {}", a["bbox"], b["bbox"]);
-            }
-            // Masks: the same pixels, up to a few on the threshold (IoU > 0.99).
-            let rle = |r: &serde_json::Value| {
+            let rle = |r: &Value| {
                 let h = r["segmentation"]["size"][0].as_u64().unwrap() as u32;
                 let w = r["segmentation"]["size"][1].as_u64().unwrap() as u32;
                 Rle::from_compressed(r["segmentation"]["counts"].as_str().unwrap(), h, w).unwrap()
@@ -129,7 +143,7 @@ fn export_then_predict_with_tract_matches_checkpoint() {
             );
         }
     }
-    let images: serde_json::Value =
+    let images: Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("p_onnx/images.json")).unwrap())
             .unwrap();
     assert_eq!(images["categories"][0]["name"], "carcass");
@@ -280,64 +294,18 @@ fn maskrcnn_exports_three_graphs_that_tract_runs_like_chicktrain() {
     // predict --onnx: the graphs through tract, chicktrain's postprocess between them;
     // the same detections as predict --checkpoint above a clear gap in the scores (as
     // for YOLO: near-tied low scores make NMS order a coin toss between engines).
-    let imgs = d.join("imgs");
-    assert_success(&run(&[
-        "render",
-        "--out",
-        imgs.to_str().unwrap(),
-        "--count",
-        "2",
-        "--size",
-        "160",
-    ]));
-    let input = imgs.join("images");
-    let pred = |args: &[&str], conf: &str, out: &Path| {
-        let mut a = vec![
-            "predict",
-            "--input",
-            input.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--conf",
-            conf,
-        ];
-        a.extend_from_slice(args);
-        let o = run(&a);
-        assert_success(&o);
-        results(out)
-    };
+    let input = render_inputs(&d);
+    let pred = |args: &[&str], conf: &str, out: &str| predict(&input, args, conf, &d.join(out));
     let best_s = best.to_str().unwrap();
     let onnx = mr.join("best.onnx");
-    let all = pred(&["--checkpoint", best_s], "0.05", &d.join("p_all"));
-    let mut scores: Vec<f64> = all.iter().map(|r| r["score"].as_f64().unwrap()).collect();
-    scores.sort_by(|a, b| b.total_cmp(a));
-    let conf = match scores.windows(2).find(|w| w[0] - w[1] > 1e-3) {
-        Some(g) => format!("{}", (g[0] + g[1]) / 2.0),
-        None => "0.05".to_string(),
-    };
-    let by_ck = pred(&["--checkpoint", best_s], &conf, &d.join("p_ck"));
-    let by_onnx = pred(
-        &["--onnx", onnx.to_str().unwrap()],
-        &conf,
-        &d.join("p_onnx"),
-    );
+    let all = pred(&["--checkpoint", best_s], "0.05", "p_all");
+    let conf = conf_above_gap(&all).unwrap_or_else(|| "0.05".to_string());
+    let by_ck = pred(&["--checkpoint", best_s], &conf, "p_ck");
+    let by_onnx = pred(&["--onnx", onnx.to_str().unwrap()], &conf, "p_onnx");
     eprintln!(
         "Mask R-CNN predict at --conf {conf}: {} detections by the checkpoint, {} by the ONNX graphs",
         by_ck.len(),
         by_onnx.len()
     );
-    assert_eq!(by_ck.len(), by_onnx.len(), "at --conf {conf}");
-    for (a, b) in by_ck.iter().zip(&by_onnx) {
-        assert_eq!(a["image_id"], b["image_id"]);
-        assert_eq!(a["category_id"], b["category_id"]);
-        let (sa, sb) = (a["score"].as_f64().unwrap(), b["score"].as_f64().unwrap());
-        assert!((sa - sb).abs() < 1e-4, "score {sa} vs {sb}");
-        for k in 0..4 {
-            let (u, v) = (
-                a["bbox"][k].as_f64().unwrap(),
-                b["bbox"][k].as_f64().unwrap(),
-            );
-            assert!((u - v).abs() < 0.05, "bbox {} vs {}", a["bbox"], b["bbox"]);
-        }
-    }
+    assert_same_detections(&by_ck, &by_onnx, &conf);
 }

@@ -191,6 +191,55 @@ pub fn measure(variant: &Variant, size: usize, e: Effort, device: &Device) -> Re
     })
 }
 
+/// Times `warmup + repeats` calls of `run` and keeps the last `repeats` (ms).
+fn time_runs(
+    warmup: usize,
+    repeats: usize,
+    mut run: impl FnMut() -> Result<()>,
+) -> Result<Vec<f64>> {
+    let mut times = Vec::with_capacity(repeats);
+    for r in 0..warmup + repeats {
+        let t = Instant::now();
+        run()?;
+        if r >= warmup {
+            times.push(ms(t));
+        }
+    }
+    Ok(times)
+}
+
+/// Times `1 + steps` training steps (the first untimed): `loss` of the model, backward,
+/// an SGD step, then `probe` (a sum over one updated weight) read back to the host so the
+/// step has really run on a lazy backend.
+fn time_train_steps<M: Module>(
+    steps: usize,
+    model: M,
+    optim: &mut ModuleOptimizer,
+    mut loss: impl FnMut(&M) -> Tensor<1>,
+    probe: impl Fn(&M) -> Tensor<1>,
+) -> Result<Vec<f64>> {
+    // The optimiser takes the model by value: a slot moves it through each step without
+    // a clone (a second handle would keep the backend from updating weights in place).
+    let mut slot = Some(model);
+    time_runs(1, steps, || {
+        let m = slot.take().expect("the model is put back after every step");
+        let grads = GradientsParams::from_grads(loss(&m).backward(), &m);
+        let m = optim.step(0.01, m, grads);
+        let _ = to_host(probe(&m));
+        slot = Some(m);
+        Ok(())
+    })
+}
+
+/// The two-stage and query-based families return one detection list per image; a batch
+/// of one must give one.
+fn one_result(n: usize, family: &str) -> Result<()> {
+    if n != 1 {
+        bail!("{family} returned {n} results for 1 image");
+    }
+    Ok(())
+}
+
 /// A YOLO variant: fused (BatchNorm-folded) batch-1 inference, then training steps of
 /// the unfused model with the real loss.
 fn time_yolo(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Result<Timed> {
@@ -201,34 +250,25 @@ fn time_yolo(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Res
         mut optim,
     } = i;
     let cfg = v.yolo_config(size).expect("a YOLO variant");
-    let mut model = cfg.init(ad);
+    let model = cfg.init(ad);
     let summary = model.summary(size);
     let fused = model.valid().fuse();
-    let mut lat = Vec::new();
-    for r in 0..e.warmup + e.repeats {
-        let t = Instant::now();
+    let lat = time_runs(e.warmup, e.repeats, || {
         let out = fused.forward(x1.clone());
         let _ = to_host(out.cls_logits);
         let _ = to_host(out.proto);
-        if r >= e.warmup {
-            lat.push(ms(t));
-        }
-    }
+        Ok(())
+    })?;
     drop(fused);
     let infer_peak = peak_rss_mib();
     let w = LossWeights::default();
-    let mut steps = Vec::new();
-    for r in 0..1 + e.train_steps {
-        let t = Instant::now();
-        let out = model.forward(xb.clone());
-        let loss = yolo_loss(&out, &targets, &w);
-        let grads = GradientsParams::from_grads(loss.total.backward(), &model);
-        model = optim.step(0.01, model, grads);
-        let _ = to_host(model.head.boxes[0].out.weight.val().sum());
-        if r >= 1 {
-            steps.push(ms(t));
-        }
-    }
+    let steps = time_train_steps(
+        e.train_steps,
+        model,
+        &mut optim,
+        |m| yolo_loss(&m.forward(xb.clone()), &targets, &w).total,
+        |m| m.head.boxes[0].out.weight.val().sum(),
+    )?;
     Ok(Timed {
         summary,
         infer_peak,
@@ -247,34 +287,22 @@ fn time_maskrcnn(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) ->
         mut optim,
     } = i;
     let cfg = v.maskrcnn_config(size).expect("a Mask R-CNN variant");
-    let mut model = cfg.init(ad);
+    let model = cfg.init(ad);
     let summary = model.summary(size);
     let eval = model.valid();
-    let mut lat = Vec::new();
-    for r in 0..e.warmup + e.repeats {
-        let t = Instant::now();
-        let dets = eval.forward_infer(x1.clone());
-        if dets.len() != 1 {
-            bail!("Mask R-CNN returned {} results for 1 image", dets.len());
-        }
-        if r >= e.warmup {
-            lat.push(ms(t));
-        }
-    }
+    let lat = time_runs(e.warmup, e.repeats, || {
+        one_result(eval.forward_infer(x1.clone()).len(), "Mask R-CNN")
+    })?;
     drop(eval);
     let infer_peak = peak_rss_mib();
     let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let mut steps = Vec::new();
-    for r in 0..1 + e.train_steps {
-        let t = Instant::now();
-        let losses = model.forward_train(xb.clone(), &targets.images, &mut rng);
-        let grads = GradientsParams::from_grads(losses.total.backward(), &model);
-        model = optim.step(0.01, model, grads);
-        let _ = to_host(model.box_head.cls_score.weight.val().sum());
-        if r >= 1 {
-            steps.push(ms(t));
-        }
-    }
+    let steps = time_train_steps(
+        e.train_steps,
+        model,
+        &mut optim,
+        |m| m.forward_train(xb.clone(), &targets.images, &mut rng).total,
+        |m| m.box_head.cls_score.weight.val().sum(),
+    )?;
     Ok(Timed {
         summary,
         infer_peak,
@@ -293,34 +321,22 @@ fn time_mask2former(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs)
         mut optim,
     } = i;
     let cfg = v.mask2former_config(size).expect("a Mask2Former variant");
-    let mut model = cfg.init(ad);
+    let model = cfg.init(ad);
     let summary = model.summary(size);
     let eval = model.valid();
-    let mut lat = Vec::new();
-    for r in 0..e.warmup + e.repeats {
-        let t = Instant::now();
-        let dets = eval.forward_infer(x1.clone());
-        if dets.len() != 1 {
-            bail!("Mask2Former returned {} results for 1 image", dets.len());
-        }
-        if r >= e.warmup {
-            lat.push(ms(t));
-        }
-    }
+    let lat = time_runs(e.warmup, e.repeats, || {
+        one_result(eval.forward_infer(x1.clone()).len(), "Mask2Former")
+    })?;
     drop(eval);
     let infer_peak = peak_rss_mib();
     let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let mut steps = Vec::new();
-    for r in 0..1 + e.train_steps {
-        let t = Instant::now();
-        let losses = model.forward_train(xb.clone(), &targets.images, &mut rng);
-        let grads = GradientsParams::from_grads(losses.total.backward(), &model);
-        model = optim.step(0.01, model, grads);
-        let _ = to_host(model.transformer_decoder.class_embed.weight.val().sum());
-        if r >= 1 {
-            steps.push(ms(t));
-        }
-    }
+    let steps = time_train_steps(
+        e.train_steps,
+        model,
+        &mut optim,
+        |m| m.forward_train(xb.clone(), &targets.images, &mut rng).total,
+        |m| m.transformer_decoder.class_embed.weight.val().sum(),
+    )?;
     Ok(Timed {
         summary,
         infer_peak,

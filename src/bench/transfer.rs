@@ -21,7 +21,7 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::config::{self, Config, DeviceKind};
-use crate::eval::report::Table;
+use crate::eval::report::{stat_cells, stat_columns, Table};
 use crate::render::randomize::Randomize;
 use crate::train::checkpoint::Checkpoint;
 use crate::train::evaluate::{score_checkpoint, SplitName};
@@ -215,15 +215,11 @@ pub fn write_report(out: &Path, runs: &[RunScore], preamble: &str) -> Result<Str
         ["variant", "seed", "steps"]
             .into_iter()
             .map(String::from)
-            .chain(["bbox", "segm"].iter().flat_map(|k| {
-                crate::eval::STAT_NAMES
-                    .iter()
-                    .map(move |n| format!("{k}_{n}"))
-            })),
+            .chain(stat_columns()),
     );
     for r in runs {
         let mut row = vec![r.variant.clone(), r.seed.to_string(), r.steps.to_string()];
-        row.extend(r.bbox.iter().chain(&r.segm).map(|v| format!("{v:.4}")));
+        row.extend(stat_cells(&r.bbox, &r.segm));
         rc.push(row);
     }
     crate::util::write_atomic(&out.join("runs.csv"), rc.to_csv().as_bytes())?;

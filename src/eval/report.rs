@@ -14,6 +14,22 @@ pub struct Table {
     pub rows: Vec<Vec<String>>,
 }
 
+/// The 24 COCO stat columns of a per-run table, bbox then segm (`bbox_AP` … `segm_AR_large`),
+/// so every `runs.csv` names them alike.
+pub fn stat_columns() -> impl Iterator<Item = String> {
+    ["bbox", "segm"]
+        .into_iter()
+        .flat_map(|k| super::STAT_NAMES.iter().map(move |n| format!("{k}_{n}")))
+}
+
+/// A run's 24 stats as cells in [`stat_columns`] order, 4 decimals.
+pub fn stat_cells<'a>(
+    bbox: &'a [f64; 12],
+    segm: &'a [f64; 12],
+) -> impl Iterator<Item = String> + 'a {
+    bbox.iter().chain(segm).map(|v| format!("{v:.4}"))
+}
+
 impl Table {
     pub fn new<S: Into<String>>(header: impl IntoIterator<Item = S>) -> Table {
         Table {

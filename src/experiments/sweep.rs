@@ -21,7 +21,7 @@ use anyhow::{bail, Context, Result};
 
 use crate::config::{self, DeviceKind};
 use crate::eval::plots::{write_png, Panel, Series, PALETTE};
-use crate::eval::report::Table;
+use crate::eval::report::{stat_cells, stat_columns, Table};
 use crate::train::checkpoint::Checkpoint;
 use crate::train::run_files;
 use crate::train::smoke::smoke_config;
@@ -157,11 +157,7 @@ pub fn write_report(out: &Path, results: &[RunResult], protocol: &str) -> Result
         ["synthetic", "seed", "train_seconds"]
             .into_iter()
             .map(String::from)
-            .chain(["bbox", "segm"].iter().flat_map(|k| {
-                crate::eval::STAT_NAMES
-                    .iter()
-                    .map(move |n| format!("{k}_{n}"))
-            })),
+            .chain(stat_columns()),
     );
     for r in results {
         let mut row = vec![
@@ -169,7 +165,7 @@ pub fn write_report(out: &Path, results: &[RunResult], protocol: &str) -> Result
             r.seed.to_string(),
             format!("{:.1}", r.train_seconds),
         ];
-        row.extend(r.bbox.iter().chain(&r.segm).map(|v| format!("{v:.4}")));
+        row.extend(stat_cells(&r.bbox, &r.segm));
         runs.push(row);
     }
     crate::util::write_atomic(&out.join("runs.csv"), runs.to_csv().as_bytes())?;

@@ -1,7 +1,9 @@
 //! Helpers shared by the test crates: running the binary (here), the `--smoke` scenario
-//! of the `train_*` tests ([`smoke`]) and the tiny Mask R-CNN of the model tests ([`tiny`]).
+//! of the `train_*` tests ([`smoke`]), the one-batch scene of the `*_learns` tests
+//! ([`overfit`]) and the tiny Mask R-CNN of the model tests ([`tiny`]).
 #![allow(dead_code)] // each test crate uses its own subset
 
+pub mod overfit;
 pub mod smoke;
 pub mod tiny;
 

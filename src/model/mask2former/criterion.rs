@@ -238,24 +238,9 @@ pub fn set_criterion<R: Rng>(
 
 #[cfg(test)]
 mod tests {
+    use super::super::fixture::{points_losses, vecf};
     use super::*;
     use burn::tensor::Device;
-    use serde_json::Value;
-
-    fn vecf(v: &Value) -> Vec<f32> {
-        v.as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap() as f32)
-            .collect()
-    }
-
-    fn fixture() -> Value {
-        serde_json::from_str(include_str!(
-            "../../../tests/fixtures/mask2former/points_losses.json"
-        ))
-        .unwrap()
-    }
 
     fn close(a: &[f32], b: &[f32], tol: f32) {
         assert_eq!(a.len(), b.len());
@@ -266,7 +251,7 @@ mod tests {
 
     #[test]
     fn point_sample_equals_grid_sample() {
-        let f = fixture();
+        let f = points_losses();
         let d = Device::flex();
         let u = |k: &str| f[k].as_u64().unwrap() as usize;
         let (n, k, h, w) = (u("n"), u("k"), u("h"), u("w"));
@@ -291,7 +276,7 @@ mod tests {
 
     #[test]
     fn bce_dice_and_class_loss_equal_the_reference() {
-        let f = fixture();
+        let f = points_losses();
         let d = Device::flex();
         let (n, k) = (
             f["n"].as_u64().unwrap() as usize,

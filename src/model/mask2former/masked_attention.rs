@@ -133,18 +133,11 @@ pub fn attention_bias(
 
 #[cfg(test)]
 mod tests {
+    use super::super::fixture::vecf;
     use super::*;
     use crate::util::tensor::{host, to_host};
     use burn::module::Param;
     use serde_json::Value;
-
-    fn vecf(v: &Value) -> Vec<f32> {
-        v.as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap() as f32)
-            .collect()
-    }
 
     fn linear(w: Vec<f32>, b: Vec<f32>, dim: usize, d: &Device) -> Linear {
         // PyTorch's weight is [out, in]; Burn's [in, out].

@@ -88,23 +88,12 @@ pub fn match_queries(cost: &[f64], queries: usize, targets: usize) -> Vec<(usize
 
 #[cfg(test)]
 mod tests {
+    use super::super::fixture::{points_losses, vecf};
     use super::*;
-    use serde_json::Value;
-
-    fn vecf(v: &Value) -> Vec<f32> {
-        v.as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap() as f32)
-            .collect()
-    }
 
     #[test]
     fn costs_and_assignment_equal_the_reference() {
-        let f: Value = serde_json::from_str(include_str!(
-            "../../../tests/fixtures/mask2former/points_losses.json"
-        ))
-        .unwrap();
+        let f = points_losses();
         let m = &f["matcher"];
         let u = |k: &str| m[k].as_u64().unwrap() as usize;
         let (q, t, k) = (u("queries"), u("targets"), u("points"));
