@@ -9,6 +9,8 @@
 #   synthetic = the paper's 0/250/500/1000 per 60 real, scaled to 12 real training images);
 # - the Mask R-CNN CPU-protocol runs (configs/cpu_protocol_maskrcnn.toml; ResNet-18; real
 #   only and +50 with 3 seeds, +100 with 1; +200 not trained: ≈ 2.7 h a run at 1 thread);
+# - the Mask2Former CPU-protocol runs (configs/cpu_protocol_mask2former.toml; ResNet-18;
+#   real only, +50 and +100 with 3 seeds; ≈ 2.5 / 8 / 16 min a run at 1 thread);
 # - the equal-compute control (real only for 78 epochs);
 # - the scene-ablation trainings (cpu_protocol + 50 synthetic, one model option changed).
 #
@@ -35,6 +37,9 @@ mrcnn --seeds 1 --syn 100
 mrcnn --seeds 3 --syn 0,50
 # The report over every finished run (the runs column counts them; missing ones are named).
 mrcnn --seeds 3 --syn 0,50,100,200 --no-train
+M2F=runs/sweep/cpu_protocol_mask2former
+m2f() { "$CT" sweep --config configs/cpu_protocol_mask2former.toml --out $M2F --quiet "$@"; }
+m2f --seeds 3 --syn 0,50,100
 # At 15 epochs the real-only run gets 2 steps per epoch (30 in all) and learns nothing; this
 # row gives it the optimiser steps of the 50-synthetic run (78 epochs x 12 images).
 "$CT" sweep --config configs/cpu_protocol.toml --seeds 1 --syn 0 --set train.epochs=78 \
@@ -47,3 +52,7 @@ cp runs/sweep/cpu_protocol_real_78ep/sweep.md $R/real_78ep.md
 cp $SWEEP/syn200_seed0/plots.png $R/syn200_run_plots.png
 cp $MRCNN/sweep.md $MRCNN/sweep.csv $MRCNN/runs.csv $MRCNN/sweep.png bench/results/sweep_cpu_protocol_maskrcnn/
 cp $MRCNN/syn100_seed0/plots.png bench/results/sweep_cpu_protocol_maskrcnn/syn100_run_plots.png
+R=bench/results/sweep_cpu_protocol_mask2former
+mkdir -p $R
+cp $M2F/sweep.md $M2F/sweep.csv $M2F/runs.csv $M2F/sweep.png $R/
+cp $M2F/syn100_seed0/plots.png $R/syn100_run_plots.png
