@@ -47,7 +47,10 @@ fn check_run(
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{run_name}: {err}");
     assert!(
-        err.contains(&format!(" in {} (EMA and checkpoints f32", p.name())),
+        err.contains(&format!(
+            " in {} (f32 master weights, EMA and checkpoints",
+            p.name()
+        )),
         "{err}"
     );
     let run = dir.join(run_name);

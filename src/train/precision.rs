@@ -2,14 +2,17 @@
 //! the casts at its boundaries.
 //!
 //! Burn has no autocast, so "bf16" / "f16" make the reduced type the device's default
-//! float type ([`configure`]): parameters, activations and gradients all live in it,
-//! and every tensor built from host f32 data (images, targets) lands in it. What stays
-//! f32: the EMA copy (blended in f32, so its `(1 − d)` updates do not round away), every
-//! checkpoint section of weights ([`cast_module`] on save, cast to the run's type on load),
-//! gradient and weight norms (summed in f32: f16 squares overflow), and every host read
-//! (`util::tensor`). The training weights themselves are not kept as f32 masters: an
-//! update smaller than the weight's rounding step (2⁻⁸ relative in bf16, 2⁻¹¹ in f16)
-//! rounds away. The f32 path casts nothing (a cast to a tensor's own type is the tensor).
+//! float type ([`configure`]): activations, their gradients and every tensor built from
+//! host f32 data (images, targets) live in it. The trainable weights are f32 masters, as
+//! in torch AMP: each step runs forward on a copy cast inside the autodiff graph
+//! ([`graph_cast`]), so backward delivers f32 gradients to the masters and the optimiser
+//! (and its state) works in f32; an update smaller than a reduced weight's rounding step
+//! (2⁻⁸ relative in bf16) is not lost. Also f32: the EMA copy, every checkpoint section of
+//! weights ([`cast_module`] on save, cast to the run's type on load), gradient and
+//! weight norms (summed in f32: f16 squares overflow), and every host read
+//! (`util::tensor`). BatchNorm running statistics are buffers the forward updates, so
+//! they live in the run's type. The f32 path casts nothing (a cast to a tensor's own type
+//! is the tensor, and the trainer skips the per-step copy).
 
 use anyhow::{bail, Result};
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
@@ -88,6 +91,24 @@ impl ModuleMapper for CastFloats {
     }
 }
 
+/// Casts every float tensor as an operation of the autodiff graph: the cast copy's
+/// gradients flow back, cast, to the source's tensors.
+struct CastInGraph(FloatDType);
+
+impl ModuleMapper for CastInGraph {
+    fn map_float<const D: usize>(&mut self, p: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let dt = self.0;
+        p.map(|t| t.cast(dt))
+    }
+}
+
+/// The forward copy of f32 master weights `m` in the run's `dtype`: backward of a loss
+/// computed with it gives gradients (in f32) to `m`'s parameters, same ids. Casts the
+/// shared BatchNorm running statistics in place (once; they then stay in `dtype`).
+pub fn graph_cast<M: Module>(m: M, dtype: FloatDType) -> M {
+    m.map(&mut CastInGraph(dtype))
+}
+
 /// `m` with every float tensor in `dtype`; `m` itself when it already is (the f32 path:
 /// untouched). BatchNorm running statistics are cast in place (Burn shares them between
 /// clones), so cast a copy made by `valid()` (which has its own) when the source must
@@ -150,6 +171,29 @@ mod tests {
         // The source keeps its type (its running statistics were not cast in place).
         assert!(all_in(&m, FloatDType::F32));
         assert_eq!(crate::train::checkpoint::module_bytes(&m).unwrap(), before);
+    }
+
+    #[test]
+    fn a_graph_cast_copy_gives_f32_gradients_to_the_f32_masters() {
+        use burn::nn::{Linear, LinearConfig};
+        use burn::optim::GradientsParams;
+        let ad = Device::flex().autodiff();
+        let master: Linear = LinearConfig::new(4, 3).init(&ad);
+        let fwd = graph_cast(master.clone(), FloatDType::BF16);
+        assert!(all_in(&fwd, FloatDType::BF16) && all_in(&master, FloatDType::F32));
+        let x = Tensor::<2>::ones([2, 4], &ad).cast(FloatDType::BF16);
+        let loss = fwd.forward(x).powi_scalar(2).sum();
+        assert_eq!(FloatDType::from(loss.dtype()), FloatDType::BF16);
+        let grads = GradientsParams::from_grads(loss.backward(), &master);
+        let g = grads
+            .get::<2>(master.weight.id)
+            .expect("the master weight has a gradient");
+        assert_eq!(FloatDType::from(g.dtype()), FloatDType::F32);
+        let v = crate::util::tensor::to_host(g);
+        assert!(
+            v.iter().all(|x| x.is_finite()) && v.iter().any(|x| *x != 0.0),
+            "{v:?}"
+        );
     }
 
     #[test]

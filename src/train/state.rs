@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use burn::module::Module;
 use burn::optim::ModuleOptimizer;
-use burn::tensor::Device;
+use burn::tensor::{Device, FloatDType};
 
 use crate::config::Config;
 
@@ -17,7 +17,7 @@ use super::ema::Ema;
 use super::init::load_init;
 use super::loss_scale::LossScaler;
 use super::optim;
-use super::precision::{cast_module, float_dtype};
+use super::precision::cast_module;
 use super::run_files::{self, EpochRecord};
 use crate::model::freeze::freeze;
 
@@ -59,12 +59,12 @@ impl TrainState {
         }
         let f16 = cfg.train.precision == crate::config::Precision::F16;
         let Some(ck) = resume else {
-            let mut model = mcfg.init(ad);
+            // f32 master weights whatever the run's precision (`precision`).
+            let mut model = cast_module(mcfg.init(ad), FloatDType::F32);
             if let Some(p) = cfg.model.init() {
                 let (m, note) = load_init(model, &mcfg, Path::new(p), base)?;
                 say(note);
-                // Loaded weights keep the file's type; the run computes in its own.
-                model = cast_module(m, float_dtype(cfg.train.precision));
+                model = cast_module(m, FloatDType::F32);
             }
             let model = freeze(model, &frozen);
             let ema = Ema::new(&model, 0).with_frozen(frozen);
@@ -90,7 +90,7 @@ impl TrainState {
             ));
         }
         let in_last = || format!("--resume: in {}", last.display());
-        let model = freeze(ck.model("model", ad).with_context(in_last)?, &frozen);
+        let model = freeze(ck.model_f32("model", ad).with_context(in_last)?, &frozen);
         let ema = Ema {
             model: ck.model_f32("ema", base).with_context(in_last)?,
             updates: ck.header.ema_updates,
@@ -110,8 +110,8 @@ impl TrainState {
         })
     }
 
-    /// The weights evaluated and shipped: the EMA copy (f32), or the model with EMA off
-    /// (in the run's type; checkpoints convert it to f32).
+    /// The weights evaluated and shipped: the EMA copy, or the model with EMA off (both
+    /// f32 weights; BatchNorm statistics in the run's type until a checkpoint casts them).
     pub fn eval_model(&self, ema: bool) -> Detector {
         if ema {
             self.ema.model.clone()

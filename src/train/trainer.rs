@@ -15,7 +15,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use burn::module::Module;
 use burn::optim::GradientsParams;
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, FloatDType, Tensor, TensorData};
 
 use crate::annotations::split::Split;
 use crate::config::{Config, DeviceKind};
@@ -28,7 +28,7 @@ use super::device::device_with;
 use super::divergence::{check_weights, At, DivergenceGuard};
 use super::evaluate::evaluate_ids;
 use super::loader::{epoch_batches, mix, Loader, Mix};
-use super::precision::{copy_in, float_dtype};
+use super::precision::{copy_in, float_dtype, graph_cast};
 use super::run_files::{self, EpochRecord, StatsRecord, TestRecord};
 use super::schedule::step_lr;
 use super::smoke::smoke_config;
@@ -304,6 +304,7 @@ fn run_epoch(
 ) -> Result<EpochSteps> {
     let te = Instant::now();
     let bsz = cfg.train.batch;
+    let dtype = float_dtype(cfg.train.precision);
     let m = Mix::of(&cfg.train);
     // The LR schedule counts warmup in these steps, so it stays in epochs whatever
     // `train.steps_per_epoch` is.
@@ -340,11 +341,12 @@ fn run_epoch(
                 .with_context(|| format!("building batch {} of epoch {}", step + 1, epoch + 1))?;
             let n = batch.dims[0];
             let x = Tensor::<4>::from_data(TensorData::new(batch.pixels, batch.dims), ad);
-            let loss = st.model.loss(
-                x,
-                &batch.targets,
-                mix(mix(cfg.seed ^ 0x5A3D, epoch as u64), step as u64),
-            );
+            let sample_seed = mix(mix(cfg.seed ^ 0x5A3D, epoch as u64), step as u64);
+            let loss = match dtype {
+                FloatDType::F32 => st.model.loss(x, &batch.targets, sample_seed),
+                // Forward on a reduced copy of the f32 masters, cast inside the graph.
+                d => graph_cast(st.model.clone(), d).loss(x, &batch.targets, sample_seed),
+            };
             let mut v = loss.terms.clone();
             v.push(loss.total_value);
             let at = At {
@@ -513,7 +515,7 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         match cfg.train.precision {
             crate::config::Precision::F32 => String::new(),
             p => format!(
-                " in {} (EMA and checkpoints f32{})",
+                " in {} (f32 master weights, EMA and checkpoints{})",
                 p.name(),
                 if st.scaler.is_some() {
                     ", dynamic loss scaling"
