@@ -183,3 +183,25 @@ fn bad_precision_values_and_devices_without_it_are_clean_errors() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_divergence_guard_still_stops_a_bf16_run() {
+    // As in f32 (README): lr 10 explodes the loss at the second step.
+    let dir = tmp("prec-div");
+    let out = smoke(
+        &dir,
+        "quickstart.toml",
+        "q",
+        &["train.precision=bf16", "train.lr=10"],
+    );
+    assert_clean_error(
+        &out,
+        &[
+            "training diverged",
+            "epoch 1, step 2",
+            "no checkpoint was written yet",
+        ],
+    );
+    assert!(!dir.join("q/last.bpk").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -97,7 +97,7 @@ fn resume_point(cfg: &Config, run_dir: &Path) -> Result<Checkpoint> {
     let (was, now) = (ck.header.config.train.precision, cfg.train.precision);
     if was != now {
         bail!(
-            "--resume: {} was trained with train.precision = \"{}\", the config asks for \"{}\"; its optimiser state is in the run's float type, so continue with --set train.precision={} (or start a new run from its weights with --set model.init=\"{}\")",
+            "--resume: {} was trained with train.precision = \"{}\", the config asks for \"{}\"; a resume continues a run as it was trained (its loss scaling, and the same steps as an uninterrupted run), so continue with --set train.precision={} (or start a new run from its weights with --set model.init=\"{}\")",
             p.display(),
             was.name(),
             now.name(),
