@@ -9,25 +9,32 @@ use crate::config::{DeviceKind, Precision};
 
 use super::precision::configure;
 
-/// The Burn device of a kind in f32 (evaluation, prediction, benchmarks: checkpoints are
-/// f32 whatever precision trained them), checked to work like [`device_with`].
+/// The Burn device of a kind in its float type as it is (f32, unless a run in this
+/// process set another), checked to work like [`device_with`]: evaluation, prediction
+/// and benchmarks, which load f32 checkpoints into whatever type the device has.
 pub fn device_of(kind: DeviceKind) -> Result<Device> {
-    device_with(kind, Precision::F32)
+    build(kind, None)
 }
 
 /// The Burn device of a kind with default float type `p` (`train.precision`, set before
 /// any tensor exists there), checked to work: a GPU device runs one small operation
 /// first, so a missing driver or GPU fails here with a message rather than as a panic
 /// at the first training step.
-#[allow(deprecated)] // Device::ndarray: the trainer must still run there.
 pub fn device_with(kind: DeviceKind, p: Precision) -> Result<Device> {
+    build(kind, Some(p))
+}
+
+#[allow(deprecated)] // Device::ndarray: the trainer must still run there.
+fn build(kind: DeviceKind, p: Option<Precision>) -> Result<Device> {
     match kind {
         DeviceKind::Flex | DeviceKind::Ndarray => {
             let mut d = match kind {
                 DeviceKind::Flex => Device::flex(),
                 _ => Device::ndarray(),
             };
-            configure(&mut d, kind, p)?;
+            if let Some(p) = p {
+                configure(&mut d, kind, p)?;
+            }
             Ok(d)
         }
         DeviceKind::Cuda(index) => cuda(index, p),
@@ -36,7 +43,7 @@ pub fn device_with(kind: DeviceKind, p: Precision) -> Result<Device> {
 }
 
 #[cfg(feature = "cuda")]
-fn cuda(index: usize, p: Precision) -> Result<Device> {
+fn cuda(index: usize, p: Option<Precision>) -> Result<Device> {
     probe(
         || Device::cuda(index),
         DeviceKind::Cuda(index),
@@ -47,14 +54,14 @@ fn cuda(index: usize, p: Precision) -> Result<Device> {
 }
 
 #[cfg(not(feature = "cuda"))]
-fn cuda(index: usize, _: Precision) -> Result<Device> {
+fn cuda(index: usize, _: Option<Precision>) -> Result<Device> {
     bail!(
         "device cuda:{index}: this chicktrain was built without the `cuda` feature; build it with `cargo build --release --features cuda` (running it needs an NVIDIA driver and the CUDA runtime libraries), or use --device flex"
     )
 }
 
 #[cfg(feature = "wgpu")]
-fn wgpu(p: Precision) -> Result<Device> {
+fn wgpu(p: Option<Precision>) -> Result<Device> {
     probe(
         || Device::wgpu(burn::tensor::DeviceKind::DefaultDevice),
         DeviceKind::Wgpu,
@@ -65,20 +72,20 @@ fn wgpu(p: Precision) -> Result<Device> {
 }
 
 #[cfg(not(feature = "wgpu"))]
-fn wgpu(_: Precision) -> Result<Device> {
+fn wgpu(_: Option<Precision>) -> Result<Device> {
     bail!(
         "device wgpu: this chicktrain was built without the `wgpu` feature; build it with `cargo build --release --features wgpu` (running it needs a Vulkan, Metal or DX12 driver), or use --device flex"
     )
 }
 
-/// Builds the device, sets its float type `p` and runs `1 + 1` on it with the panic hook
-/// silenced: backends panic when no adapter or driver is found, which becomes an error
-/// naming `needs`.
+/// Builds the device, sets its float type `p` (if given) and runs `1 + 1` on it with the
+/// panic hook silenced: backends panic when no adapter or driver is found, which becomes
+/// an error naming `needs`.
 #[cfg(any(feature = "cuda", feature = "wgpu"))]
 fn probe(
     make: impl FnOnce() -> Device,
     kind: DeviceKind,
-    p: Precision,
+    p: Option<Precision>,
     name: &str,
     needs: &str,
 ) -> Result<Device> {
@@ -87,7 +94,7 @@ fn probe(
     // The probe's state is dropped on a panic, never observed half-updated.
     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         let mut d = make();
-        configure(&mut d, kind, p).map(|()| {
+        p.map_or(Ok(()), |p| configure(&mut d, kind, p)).map(|()| {
             let one = burn::tensor::Tensor::<1>::ones([1], &d);
             let v = crate::util::tensor::to_host(one.clone() + one);
             (d, v)

@@ -31,9 +31,17 @@ pub fn float_dtype(p: Precision) -> FloatDType {
 
 /// Makes `p` the default float type of `device` (`kind` names it in messages). Must run
 /// before any tensor exists there: settings are fixed per device and process once a
-/// tensor has been made. f32 changes nothing (the backends' default).
+/// tensor has been made. f32 changes nothing (the backends' default) but is refused on a
+/// device an earlier run in this process set to another type (a sweep of precisions in
+/// one process would otherwise train its "f32" runs in that type).
 pub fn configure(device: &mut Device, kind: DeviceKind, p: Precision) -> Result<()> {
     if p == Precision::F32 {
+        let have = device.settings().float_dtype;
+        if have != FloatDType::F32 {
+            bail!(
+                "train.precision = \"f32\": device {kind:?} already computes in {have:?} in this process (an earlier run in it set that); run f32 as its own chicktrain command"
+            );
+        }
         return Ok(());
     }
     let want = float_dtype(p);
