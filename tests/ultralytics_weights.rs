@@ -346,6 +346,7 @@ fn checkpoint_of(
             ema_updates: 9,
             best_fitness: 0.5,
             val: None,
+            loss_scale: None,
         },
         sections: vec![("ema".into(), module_bytes(&model).unwrap())],
     }

@@ -21,7 +21,7 @@ pub use model::{
     ModelKind, YoloModelConfig, YoloScale,
 };
 pub use shipped::SHIPPED;
-pub use train::{OptimizerKind, ScheduleKind, TrainConfig};
+pub use train::{OptimizerKind, Precision, ScheduleKind, TrainConfig};
 
 /// Where a run's tensors live: `"flex"` (Burn's pure-Rust CPU backend, the default),
 /// `"ndarray"` (the deprecated CPU backend, kept working), `"cuda"` / `"cuda:N"` (NVIDIA

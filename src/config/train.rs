@@ -18,6 +18,29 @@ pub enum ScheduleKind {
     Multistep,
 }
 
+/// Float type of parameters and activations (`train.precision`). Burn has no autocast:
+/// a reduced type is the device's default float type for the whole run (see
+/// `train::precision`); f16 adds dynamic loss scaling (`train::loss_scale`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    #[default]
+    F32,
+    F16,
+    Bf16,
+}
+
+impl Precision {
+    /// The value as written in a config.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F16 => "f16",
+            Precision::Bf16 => "bf16",
+        }
+    }
+}
+
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrainConfig {
@@ -109,6 +132,15 @@ pub struct TrainConfig {
     /// `copy_paste`, Ghiasi et al. 2021). 0 = off.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub copy_paste: f64,
+    /// Float type of the run: "f32" (default), "bf16" or "f16" (with dynamic loss
+    /// scaling). Checkpoints are written in f32 whatever it is. f32 is left out of
+    /// resolved configs and checkpoint headers, which then read as before this key.
+    #[serde(default, skip_serializing_if = "is_f32")]
+    pub precision: Precision,
+}
+
+fn is_f32(p: &Precision) -> bool {
+    *p == Precision::F32
 }
 
 fn default_epochs() -> usize {
@@ -344,5 +376,27 @@ mod tests {
             assert!(e.contains(needle), "{text}: {e}");
         }
         assert!(toml::from_str::<TrainConfig>("mosaics = 1").is_err());
+    }
+
+    #[test]
+    fn precision_defaults_to_f32_is_left_out_and_bad_values_list_the_choices() {
+        let t = TrainConfig::default();
+        assert_eq!(t.precision, Precision::F32);
+        assert!(!toml::to_string(&t).unwrap().contains("precision"));
+        for (text, want) in [("f16", Precision::F16), ("bf16", Precision::Bf16)] {
+            let t: TrainConfig = toml::from_str(&format!("precision = \"{text}\"")).unwrap();
+            assert_eq!(t.precision, want);
+            assert_eq!(want.name(), text);
+            assert!(toml::to_string(&t)
+                .unwrap()
+                .contains(&format!("precision = \"{text}\"")));
+        }
+        let e = toml::from_str::<TrainConfig>("precision = \"fp16\"")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("fp16") && e.contains("`f32`, `f16`, `bf16`"),
+            "{e}"
+        );
     }
 }

@@ -15,13 +15,15 @@ use anyhow::{bail, Context, Result};
 use burn::module::Module;
 use burn::optim::ModuleOptimizer;
 use burn::store::ModuleRecord;
-use burn::tensor::{Bytes, Device};
+use burn::tensor::{Bytes, Device, FloatDType};
 use serde::{Deserialize, Serialize};
 
 use crate::annotations::split::Split;
 use crate::config::Config;
 
 use super::detector::{Detector, DetectorConfig};
+use super::loss_scale::LossScaler;
+use super::precision::{all_in, f32_copy};
 
 use crate::model::weights::CHICKTRAIN_MAGIC as MAGIC;
 /// Header format: 2 added the model kind (`model.kind`).
@@ -56,6 +58,9 @@ pub struct Header {
     pub best_fitness: f64,
     /// Validation stats of the `ema` weights after `epoch`.
     pub val: Option<Stats>,
+    /// f16 runs: the loss scaler's state, so `--resume` continues with it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_scale: Option<LossScaler>,
 }
 
 /// A checkpoint in memory.
@@ -64,11 +69,15 @@ pub struct Checkpoint {
     pub sections: Vec<(String, Vec<u8>)>,
 }
 
-/// Serialises a module's weights (burnpack).
+/// Serialises a module's weights (burnpack), always in f32: a checkpoint loads on any
+/// device and precision (an f16 / bf16 module is cast on a copy; f32 is written as is).
 pub fn module_bytes<M: Module>(m: &M) -> Result<Vec<u8>> {
-    let b = m
-        .clone()
-        .into_record()
+    let rec = if all_in(m, FloatDType::F32) {
+        m.clone().into_record()
+    } else {
+        f32_copy(m).into_record()
+    };
+    let b = rec
         .into_bytes()
         .map_err(|e| anyhow::anyhow!("cannot serialise weights: {e}"))?;
     Ok(b.to_vec())
@@ -171,14 +180,32 @@ impl Checkpoint {
             .map(|s| s.1.as_slice())
     }
 
-    /// Builds the model of the header on `device` and loads section `name` into it.
+    /// Builds the model of the header on `device` and loads section `name` into it, in
+    /// the device's float type (the f32 weights are cast on load on an f16 / bf16 device).
     pub fn model(&self, name: &str, device: &Device) -> Result<Detector> {
+        self.load_model(
+            name,
+            device,
+            device.settings().float_dtype != FloatDType::F32,
+        )
+    }
+
+    /// [`Self::model`] in the file's type, f32, whatever the device's: the EMA copy of a
+    /// reduced-precision run, which stays f32.
+    pub fn model_f32(&self, name: &str, device: &Device) -> Result<Detector> {
+        self.load_model(name, device, false)
+    }
+
+    fn load_model(&self, name: &str, device: &Device, cast: bool) -> Result<Detector> {
         let data = self
             .section(name)
             .with_context(|| format!("checkpoint has no {name:?} weights"))?;
         let model = self.header.model.init(device);
-        let rec = ModuleRecord::from_bytes(Bytes::from_bytes_vec(data.to_vec()))
+        let mut rec = ModuleRecord::from_bytes(Bytes::from_bytes_vec(data.to_vec()))
             .map_err(|e| anyhow::anyhow!("corrupt {name:?} weights in checkpoint: {e}"))?;
+        if cast {
+            rec = rec.cast_to_module_dtype();
+        }
         model.try_load_record(rec).map_err(|e| {
             anyhow::anyhow!("{name:?} weights do not fit the model of the header: {e}")
         })
@@ -242,6 +269,7 @@ mod tests {
                 ema_updates: 9,
                 best_fitness: 0.5,
                 val: None,
+                loss_scale: None,
             },
             sections: vec![(
                 "ema".into(),

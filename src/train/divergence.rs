@@ -31,7 +31,7 @@ use crate::util::stats::median_f32;
 
 use anyhow::{bail, Result};
 use burn::module::{Module, ModuleVisitor, Param};
-use burn::tensor::Tensor;
+use burn::tensor::{FloatDType, Tensor};
 
 /// A term above this multiple of its running median has exploded.
 pub const FACTOR: f32 = 20.0;
@@ -60,7 +60,7 @@ pub struct At {
 }
 
 impl At {
-    fn describe(&self) -> String {
+    pub fn describe(&self) -> String {
         format!(
             "epoch {}, step {} of {}",
             self.epoch + 1,
@@ -70,7 +70,7 @@ impl At {
     }
 
     /// What is on disk now: the previous epoch's last.bpk, or nothing.
-    fn kept(&self) -> String {
+    pub fn kept(&self) -> String {
         if self.epoch > 0 {
             format!(
                 "last.bpk still holds epoch {} (the last good one); no checkpoint of the diverged weights was written",
@@ -165,7 +165,8 @@ struct SumSquares {
 
 impl ModuleVisitor for SumSquares {
     fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        let s = param.val().powi_scalar(2).sum();
+        // Summed in f32: f16 squares overflow (a no-op cast on the f32 path).
+        let s = param.val().cast(FloatDType::F32).powi_scalar(2).sum();
         self.acc = Some(match self.acc.take() {
             Some(a) => a + s,
             None => s,

@@ -9,7 +9,7 @@
 use std::collections::VecDeque;
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
-use burn::tensor::Tensor;
+use burn::tensor::{FloatDType, Tensor};
 
 /// Decay and ramp of ultralytics' `ModelEMA`.
 pub const DECAY: f64 = 0.9999;
@@ -27,7 +27,9 @@ struct Collect(VecDeque<Tensor<1>>);
 
 impl ModuleVisitor for Collect {
     fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        let t = param.val();
+        // f32: the EMA of a reduced-precision run is kept in f32 (a no-op cast on the
+        // f32 path).
+        let t = param.val().cast(FloatDType::F32);
         let n = t.shape().num_elements();
         self.0.push_back(t.reshape([n]));
     }
@@ -73,10 +75,11 @@ impl ModuleMapper for Blend<'_> {
 }
 
 impl<M: Module> Ema<M> {
-    /// Starts from a copy of `model` (eval mode, plain device).
+    /// Starts from a copy of `model` (eval mode, plain device), in f32 whatever the
+    /// run's precision.
     pub fn new(model: &M, updates: u64) -> Ema<M> {
         Ema {
-            model: model.valid(),
+            model: super::precision::f32_copy(model),
             updates,
             frozen: Vec::new(),
         }

@@ -14,7 +14,7 @@ use burn::module::{Module, ModuleVisitor, Param, ParamGroup};
 use burn::optim::decay::WeightDecayConfig;
 use burn::optim::momentum::MomentumConfig;
 use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer, SgdConfig};
-use burn::tensor::Tensor;
+use burn::tensor::{FloatDType, Tensor};
 
 use crate::config::{OptimizerKind, TrainConfig};
 
@@ -66,7 +66,8 @@ struct SumSquares<'a> {
 impl ModuleVisitor for SumSquares<'_> {
     fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
         if let Some(g) = self.grads.get::<D>(param.id) {
-            let s = g.powi_scalar(2).sum();
+            // Summed in f32: f16 squares overflow (a no-op cast on the f32 path).
+            let s = g.cast(FloatDType::F32).powi_scalar(2).sum();
             self.acc = Some(match self.acc.take() {
                 Some(a) => a + s,
                 None => s,
@@ -96,6 +97,11 @@ pub fn grad_norm<M: Module>(module: &M, grads: &GradientsParams) -> f64 {
         Some(t) => (crate::util::tensor::scalar(&t) as f64).sqrt(),
         None => 0.0,
     }
+}
+
+/// Multiplies every gradient of `module` by `factor` (f16 loss scaling's unscale).
+pub fn scale_grads<M: Module>(module: &M, grads: &mut GradientsParams, factor: f32) {
+    module.visit(&mut Scale { grads, factor });
 }
 
 /// Scales all gradients by `max_norm / norm` when the global norm exceeds `max_norm`

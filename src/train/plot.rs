@@ -77,6 +77,7 @@ mod tests {
                 let mut segm = [0.0; 12];
                 segm[..2].copy_from_slice(&[0.05, 0.1]);
                 EpochRecord {
+                    data_wait_s: 0.0,
                     epoch: e,
                     images_per_s: 1.0,
                     loss: [
@@ -87,8 +88,10 @@ mod tests {
                     ]
                     .map(|(k, v)| (k.to_string(), v))
                     .into(),
+                    loss_scale: None,
                     lr: 0.01,
                     proxy: true,
+                    skipped_steps: 0,
                     steps: 2,
                     time: 1.0,
                     train_time: 1.0,

@@ -44,6 +44,10 @@ impl From<&Stats> for StatsRecord {
 /// training throughput and validation stats.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EpochRecord {
+    /// Seconds the training steps waited for the loader thread's next batch (rendering,
+    /// decoding, augmenting): near 0 when the data side keeps up with the device.
+    #[serde(default)]
+    pub data_wait_s: f64,
     /// 1-based.
     pub epoch: usize,
     #[serde(default)]
@@ -51,10 +55,17 @@ pub struct EpochRecord {
     /// Mean of each named loss term per step (`null` in the file reads as NaN).
     #[serde(deserialize_with = "nan_if_null")]
     pub loss: BTreeMap<String, f64>,
+    /// f16 runs: the loss scale at the end of the epoch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_scale: Option<f32>,
     pub lr: f64,
     /// True when the "real" images are proxy-real renders.
     #[serde(default)]
     pub proxy: bool,
+    /// f16 runs: steps of the epoch skipped for overflowed gradients (their loss is in
+    /// the means; no optimiser step was taken).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub skipped_steps: usize,
     /// Optimiser steps of the epoch (0 in files written before it was recorded).
     #[serde(default)]
     pub steps: usize,
@@ -66,6 +77,10 @@ pub struct EpochRecord {
     /// Validation stats; absent on epochs `train.val_every` skipped.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub val: Option<StatsRecord>,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<BTreeMap<String, f64>, D::Error> {
@@ -225,11 +240,14 @@ mod tests {
         let mut segm = [0.25; 12];
         segm[0] = segm_ap;
         EpochRecord {
+            data_wait_s: 0.25,
             epoch,
             images_per_s: 6.5,
             loss: [("box".to_string(), 1.5), ("seg".to_string(), 0.1)].into(),
+            loss_scale: None,
             lr: 0.01,
             proxy: true,
+            skipped_steps: 0,
             steps: 7,
             time: 12.0,
             train_time: 10.0,
@@ -243,11 +261,12 @@ mod tests {
     #[test]
     fn metrics_lines_keep_the_untyped_key_order() {
         let r = record(3, 0.5);
-        // What `serde_json::json!` (sorted keys) wrote before the typed record.
+        // What `serde_json::json!` (sorted keys) wrote before the typed record (plus
+        // `data_wait_s`, which sorts first).
         let v = r.val.as_ref().unwrap();
         let (bbox, segm) = (v.bbox.stats, v.segm.stats);
         let untyped = serde_json::json!({
-            "epoch": 3, "lr": 0.01, "time": 12.0, "train_time": 10.0, "images_per_s": 6.5,
+            "data_wait_s": 0.25, "epoch": 3, "lr": 0.01, "time": 12.0, "train_time": 10.0, "images_per_s": 6.5,
             "loss": {"seg": 0.1, "box": 1.5}, "proxy": true, "steps": 7,
             "val": {"bbox": {"stats": bbox}, "segm": {"stats": segm}},
         });

@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use burn::module::Module;
 use burn::optim::ModuleOptimizer;
-use burn::tensor::Device;
+use burn::tensor::{Device, FloatDType};
 
 use crate::config::Config;
 
@@ -15,7 +15,9 @@ use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header};
 use super::detector::{Detector, DetectorConfig};
 use super::ema::Ema;
 use super::init::load_init;
+use super::loss_scale::LossScaler;
 use super::optim;
+use super::precision::cast_module;
 use super::run_files::{self, EpochRecord};
 use crate::model::freeze::freeze;
 
@@ -24,6 +26,8 @@ pub struct TrainState {
     pub model: Detector,
     pub ema: Ema<Detector>,
     pub optim: ModuleOptimizer,
+    /// f16 runs: dynamic loss scaling.
+    pub scaler: Option<LossScaler>,
     /// Epochs completed.
     pub epoch: usize,
     pub best_fitness: f64,
@@ -53,12 +57,14 @@ impl TrainState {
                 frozen.join(", ")
             ));
         }
+        let f16 = cfg.train.precision == crate::config::Precision::F16;
         let Some(ck) = resume else {
-            let mut model = mcfg.init(ad);
+            // f32 master weights whatever the run's precision (`precision`).
+            let mut model = cast_module(mcfg.init(ad), FloatDType::F32);
             if let Some(p) = cfg.model.init() {
                 let (m, note) = load_init(model, &mcfg, Path::new(p), base)?;
                 say(note);
-                model = m;
+                model = cast_module(m, FloatDType::F32);
             }
             let model = freeze(model, &frozen);
             let ema = Ema::new(&model, 0).with_frozen(frozen);
@@ -66,6 +72,7 @@ impl TrainState {
                 model,
                 ema,
                 optim,
+                scaler: f16.then(LossScaler::default),
                 epoch: 0,
                 best_fitness: f64::NEG_INFINITY,
                 best_epoch: 0,
@@ -83,9 +90,9 @@ impl TrainState {
             ));
         }
         let in_last = || format!("--resume: in {}", last.display());
-        let model = freeze(ck.model("model", ad).with_context(in_last)?, &frozen);
+        let model = freeze(ck.model_f32("model", ad).with_context(in_last)?, &frozen);
         let ema = Ema {
-            model: ck.model("ema", base).with_context(in_last)?,
+            model: ck.model_f32("ema", base).with_context(in_last)?,
             updates: ck.header.ema_updates,
             frozen,
         };
@@ -95,6 +102,7 @@ impl TrainState {
             model,
             ema,
             optim,
+            scaler: f16.then(|| ck.header.loss_scale.unwrap_or_default()),
             epoch: ck.header.epoch,
             best_fitness: ck.header.best_fitness,
             best_epoch: run_files::best_epoch(&records),
@@ -102,7 +110,8 @@ impl TrainState {
         })
     }
 
-    /// The weights evaluated and shipped: the EMA copy, or the model with EMA off.
+    /// The weights evaluated and shipped: the EMA copy, or the model with EMA off (both
+    /// f32 weights; BatchNorm statistics in the run's type until a checkpoint casts them).
     pub fn eval_model(&self, ema: bool) -> Detector {
         if ema {
             self.ema.model.clone()

@@ -15,7 +15,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use burn::module::Module;
 use burn::optim::GradientsParams;
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, FloatDType, Tensor, TensorData};
 
 use crate::annotations::split::Split;
 use crate::config::{Config, DeviceKind};
@@ -24,10 +24,11 @@ use crate::data::dataset::{RealSet, SyntheticSet};
 
 use super::checkpoint::{module_bytes, Checkpoint, Header, Stats, FORMAT};
 use super::detector::DetectorConfig;
-use super::device::device_of;
+use super::device::device_with;
 use super::divergence::{check_weights, At, DivergenceGuard};
 use super::evaluate::evaluate_ids;
 use super::loader::{epoch_batches, mix, Loader, Mix};
+use super::precision::{copy_in, float_dtype, graph_cast};
 use super::run_files::{self, EpochRecord, StatsRecord, TestRecord};
 use super::schedule::step_lr;
 use super::smoke::smoke_config;
@@ -93,6 +94,17 @@ fn resume_point(cfg: &Config, run_dir: &Path) -> Result<Checkpoint> {
         );
     }
     let ck = Checkpoint::load(&p)?;
+    let (was, now) = (ck.header.config.train.precision, cfg.train.precision);
+    if was != now {
+        bail!(
+            "--resume: {} was trained with train.precision = \"{}\", the config asks for \"{}\"; a resume continues a run as it was trained (its loss scaling, and the same steps as an uninterrupted run), so continue with --set train.precision={} (or start a new run from its weights with --set model.init=\"{}\")",
+            p.display(),
+            was.name(),
+            now.name(),
+            was.name(),
+            p.display()
+        );
+    }
     if ck.header.model.kind() != cfg.model.kind() {
         let probe = DetectorConfig::from_config(cfg, ck.header.model.num_classes())?;
         if let Some(why) = probe.mismatch(&ck.header.model) {
@@ -167,6 +179,7 @@ impl Run<'_> {
             ema_updates: st.ema.updates,
             best_fitness: st.best_fitness,
             val,
+            loss_scale: st.scaler,
         }
     }
 
@@ -210,7 +223,7 @@ impl Run<'_> {
         let val = if validate {
             Some(
                 evaluate_ids(
-                    &eval_model,
+                    &copy_in(&eval_model, float_dtype(cfg.train.precision)),
                     self.real,
                     &self.split.val,
                     self.input,
@@ -223,6 +236,7 @@ impl Run<'_> {
         };
         let n = steps.steps.max(1) as f64;
         st.records.push(EpochRecord {
+            data_wait_s: steps.data_wait,
             epoch: epoch + 1,
             images_per_s: steps.images as f64 / t_train.max(1e-9),
             loss: loss_names
@@ -230,8 +244,10 @@ impl Run<'_> {
                 .zip(&steps.sums)
                 .map(|(k, s)| (k.to_string(), s / n))
                 .collect(),
+            loss_scale: st.scaler.map(|s| s.scale),
             lr: steps.last_lr,
             proxy: self.real.proxy,
+            skipped_steps: steps.skipped,
             steps: steps.steps,
             time: te.elapsed().as_secs_f64(),
             train_time: t_train,
@@ -268,6 +284,10 @@ struct EpochSteps {
     images: usize,
     /// Steps done when Ctrl-C stopped the epoch.
     interrupted: Option<usize>,
+    /// Seconds spent waiting for the loader thread's batches.
+    data_wait: f64,
+    /// f16: steps skipped by the loss scaler.
+    skipped: usize,
 }
 
 /// Runs the optimiser steps of `epoch` over `loader`'s batches.
@@ -284,6 +304,7 @@ fn run_epoch(
 ) -> Result<EpochSteps> {
     let te = Instant::now();
     let bsz = cfg.train.batch;
+    let dtype = float_dtype(cfg.train.precision);
     let m = Mix::of(&cfg.train);
     // The LR schedule counts warmup in these steps, so it stays in epochs whatever
     // `train.steps_per_epoch` is.
@@ -304,19 +325,28 @@ fn run_epoch(
         steps: 0,
         images: 0,
         interrupted: None,
+        data_wait: 0.0,
+        skipped: 0,
     };
     let result: Result<()> = std::thread::scope(|sc| {
         let rx = loader.spawn(sc, &plan, bsz, epoch);
-        for (step, batch) in rx.iter().enumerate() {
+        let mut batches = rx.iter().enumerate();
+        loop {
+            let tw = Instant::now();
+            let Some((step, batch)) = batches.next() else {
+                break;
+            };
+            out.data_wait += tw.elapsed().as_secs_f64();
             let batch = batch
                 .with_context(|| format!("building batch {} of epoch {}", step + 1, epoch + 1))?;
             let n = batch.dims[0];
             let x = Tensor::<4>::from_data(TensorData::new(batch.pixels, batch.dims), ad);
-            let loss = st.model.loss(
-                x,
-                &batch.targets,
-                mix(mix(cfg.seed ^ 0x5A3D, epoch as u64), step as u64),
-            );
+            let sample_seed = mix(mix(cfg.seed ^ 0x5A3D, epoch as u64), step as u64);
+            let loss = match dtype {
+                FloatDType::F32 => st.model.loss(x, &batch.targets, sample_seed),
+                // Forward on a reduced copy of the f32 masters, cast inside the graph.
+                d => graph_cast(st.model.clone(), d).loss(x, &batch.targets, sample_seed),
+            };
             let mut v = loss.terms.clone();
             v.push(loss.total_value);
             let at = At {
@@ -325,13 +355,45 @@ fn run_epoch(
                 per_epoch,
             };
             guard.check_step(at, &v)?;
-            let mut grads = GradientsParams::from_grads(loss.total.backward(), &st.model);
-            let norm = optim::clip_global_norm(&st.model, &mut grads, cfg.train.grad_clip)?;
-            guard.check_grad_norm(at, norm)?;
             let (rates, lr) = step_lr(&cfg.train, epoch, step, per_epoch);
-            st.model = st.optim.step(rates, st.model.clone(), grads);
-            if cfg.train.ema {
-                st.ema.update(&st.model);
+            let stepped = match &mut st.scaler {
+                None => {
+                    let mut grads = GradientsParams::from_grads(loss.total.backward(), &st.model);
+                    let norm = optim::clip_global_norm(&st.model, &mut grads, cfg.train.grad_clip)?;
+                    guard.check_grad_norm(at, norm)?;
+                    Some(grads)
+                }
+                // f16: backward of the scaled loss, unscale (and clip) in one pass over
+                // the gradients, or skip the step when they overflowed.
+                Some(scaler) => {
+                    let scale = scaler.scale;
+                    let scaled = loss.total.mul_scalar(scale);
+                    let mut grads = GradientsParams::from_grads(scaled.backward(), &st.model);
+                    let norm = optim::grad_norm(&st.model, &grads) / scale as f64;
+                    let finite = norm.is_finite();
+                    scaler.update(finite).with_context(|| {
+                        format!("training diverged at {}: {}", at.describe(), at.kept())
+                    })?;
+                    finite.then(|| {
+                        let clip = cfg.train.grad_clip;
+                        let c = if norm > clip {
+                            clip / (norm + 1e-6)
+                        } else {
+                            1.0
+                        };
+                        optim::scale_grads(&st.model, &mut grads, (c / scale as f64) as f32);
+                        grads
+                    })
+                }
+            };
+            match stepped {
+                Some(grads) => {
+                    st.model = st.optim.step(rates, st.model.clone(), grads);
+                    if cfg.train.ema {
+                        st.ema.update(&st.model);
+                    }
+                }
+                None => out.skipped += 1,
             }
             for (s, t) in out.sums.iter_mut().zip(&loss.terms) {
                 *s += *t as f64;
@@ -370,8 +432,12 @@ fn epoch_line(rec: &EpochRecord, epochs: usize, loss_names: &[&str], improved: b
         }
         None => "not validated (train.val_every)".into(),
     };
+    let scale = match rec.loss_scale {
+        Some(s) => format!(", loss scale {s}, {} skipped", rec.skipped_steps),
+        None => String::new(),
+    };
     format!(
-        "epoch {}/{}  lr {:.2e}  loss {}  {:.1} s ({:.2} img/s)  {val}{}",
+        "epoch {}/{}  lr {:.2e}  loss {}  {:.1} s ({:.2} img/s, {:.1} s data wait{scale})  {val}{}",
         rec.epoch,
         epochs,
         rec.lr,
@@ -382,6 +448,7 @@ fn epoch_line(rec: &EpochRecord, epochs: usize, loss_names: &[&str], improved: b
             .join(" "),
         rec.time,
         rec.images_per_s,
+        rec.data_wait_s,
         if improved { "  *best" } else { "" }
     )
 }
@@ -431,7 +498,7 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         }
     ));
 
-    let base = device_of(cfg.device)?;
+    let base = device_with(cfg.device, cfg.train.precision)?;
     base.seed(cfg.seed);
     let ad = base.clone().autodiff();
     let mcfg = DetectorConfig::from_config(&cfg, real.num_classes())?;
@@ -441,10 +508,22 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         say(format!("resuming after epoch {}", st.epoch));
     }
     say(format!(
-        "model: {}: {} on {:?}",
+        "model: {}: {} on {:?}{}",
         mcfg.describe(),
         st.model.summary(input),
-        cfg.device
+        cfg.device,
+        match cfg.train.precision {
+            crate::config::Precision::F32 => String::new(),
+            p => format!(
+                " in {} (f32 master weights, EMA and checkpoints{})",
+                p.name(),
+                if st.scaler.is_some() {
+                    ", dynamic loss scaling"
+                } else {
+                    ""
+                }
+            ),
+        }
     ));
     let loss_names = st.model.loss_names();
     let run = Run {
@@ -705,11 +784,14 @@ mod tests {
         let mut segm = [0.0; 12];
         segm[..2].copy_from_slice(&[0.5, 0.75]);
         let rec = EpochRecord {
+            data_wait_s: 0.5,
             epoch: 3,
             images_per_s: 6.5,
             loss: [("box".to_string(), 1.25), ("seg".to_string(), 0.5)].into(),
+            loss_scale: None,
             lr: 0.01,
             proxy: true,
+            skipped_steps: 0,
             steps: 4,
             time: 12.0,
             train_time: 10.0,
@@ -721,13 +803,24 @@ mod tests {
         let line = epoch_line(&rec, 25, &["box", "seg"], true);
         assert_eq!(
             line,
-            "epoch 3/25  lr 1.00e-2  loss box 1.250 seg 0.500  12.0 s (6.50 img/s)  val bbox AP 0.250 AP50 0.250  segm AP 0.500 AP50 0.750  *best"
+            "epoch 3/25  lr 1.00e-2  loss box 1.250 seg 0.500  12.0 s (6.50 img/s, 0.5 s data wait)  val bbox AP 0.250 AP50 0.250  segm AP 0.500 AP50 0.750  *best"
         );
         assert!(!epoch_line(&rec, 25, &["box", "seg"], false).contains("best"));
         let skipped = EpochRecord { val: None, ..rec };
         assert_eq!(
             epoch_line(&skipped, 25, &["box", "seg"], false),
-            "epoch 3/25  lr 1.00e-2  loss box 1.250 seg 0.500  12.0 s (6.50 img/s)  not validated (train.val_every)"
+            "epoch 3/25  lr 1.00e-2  loss box 1.250 seg 0.500  12.0 s (6.50 img/s, 0.5 s data wait)  not validated (train.val_every)"
+        );
+        let f16 = EpochRecord {
+            loss_scale: Some(16384.0),
+            skipped_steps: 2,
+            ..skipped
+        };
+        assert!(
+            epoch_line(&f16, 25, &["box", "seg"], false)
+                .contains("(6.50 img/s, 0.5 s data wait, loss scale 16384, 2 skipped)"),
+            "{}",
+            epoch_line(&f16, 25, &["box", "seg"], false)
         );
     }
 }

@@ -12,7 +12,7 @@
 //! Ground truth comes as [`Targets`] (per image: boxes xyxy px, classes, instance masks
 //! at input resolution). The assigner runs on host copies of the detached predictions.
 
-use burn::tensor::{Device, Int, Tensor, TensorData};
+use burn::tensor::{Device, FloatDType, Int, Tensor, TensorData};
 
 use super::assigner::{assign_image, AssignerConfig, ImageAssignment};
 use super::head::REG_MAX;
@@ -89,11 +89,16 @@ fn dfl_expectation<const D: usize, const D1: usize>(logits: Tensor<D>) -> Tensor
 }
 
 /// Complete IoU of paired boxes (ultralytics `bbox_iou(xywh=False, CIoU=True)`), with the
-/// aspect-ratio trade-off `alpha` detached as in the reference.
+/// aspect-ratio trade-off `alpha` detached as in the reference. Computed in f32 whatever
+/// the boxes' type (returned in theirs): in bf16, `1 + eps` rounds to 1, so a box that
+/// matches its target exactly (iou 1, v 0) made `alpha` 0 / 0 = NaN (a full bf16
+/// quickstart run stopped on it at epoch 14). A no-op on f32 boxes.
 ///
 /// # Shapes
 /// - `b1`, `b2`: `[N, 4]` xyxy → `[N]`
 pub fn ciou_tensor(b1: Tensor<2>, b2: Tensor<2>) -> Tensor<1> {
+    let dtype = FloatDType::from(b1.dtype());
+    let (b1, b2) = (b1.cast(FloatDType::F32), b2.cast(FloatDType::F32));
     let eps = 1e-7;
     let col = |t: &Tensor<2>, i: usize| t.clone().narrow(1, i, 1).squeeze_dim::<1>(1);
     let (a_x1, a_y1, a_x2, a_y2) = (col(&b1, 0), col(&b1, 1), col(&b1, 2), col(&b1, 3));
@@ -119,7 +124,7 @@ pub fn ciou_tensor(b1: Tensor<2>, b2: Tensor<2>) -> Tensor<1> {
         .powi_scalar(2)
         .mul_scalar(4.0 / (std::f64::consts::PI * std::f64::consts::PI));
     let alpha = (v.clone() / (iou.clone().neg() + v.clone() + (1.0 + eps))).detach();
-    iou - (rho2 / c2 + v * alpha)
+    (iou - (rho2 / c2 + v * alpha)).cast(dtype)
 }
 
 /// Builds the per-instance "overlap" index map at prototype resolution: value `k + 1` where
@@ -488,6 +493,21 @@ impl CropWindow {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ciou_of_matching_bf16_boxes_is_finite() {
+        // A prediction equal to its target: iou 1, v 0, the alpha denominator 0 in bf16.
+        let dev = Device::flex();
+        let b = Tensor::<2>::from_data(
+            TensorData::new(vec![2.0f32, 4.0, 10.0, 8.0, 1.0, 1.0, 5.0, 3.0], [2, 4]),
+            &dev,
+        )
+        .cast(FloatDType::BF16);
+        let c = ciou_tensor(b.clone(), b);
+        assert_eq!(FloatDType::from(c.dtype()), FloatDType::BF16);
+        let v = to_host(c);
+        assert!(v.iter().all(|x| (x - 1.0).abs() < 1e-2), "{v:?}");
+    }
 
     #[test]
     fn overlap_pixels_go_to_the_smaller_instance() {
