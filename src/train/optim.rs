@@ -104,8 +104,18 @@ pub fn scale_grads<M: Module>(module: &M, grads: &mut GradientsParams, factor: f
     module.visit(&mut Scale { grads, factor });
 }
 
-/// Scales all gradients by `max_norm / norm` when the global norm exceeds `max_norm`
-/// (PyTorch adds 1e-6 to the denominator). Returns the norm before clipping.
+/// The factor global-norm clipping multiplies the gradients by: `max_norm / norm` when
+/// the norm exceeds `max_norm` (PyTorch adds 1e-6 to the denominator), else 1.
+pub fn clip_factor(norm: f64, max_norm: f64) -> f64 {
+    if norm > max_norm {
+        max_norm / (norm + 1e-6)
+    } else {
+        1.0
+    }
+}
+
+/// Scales all gradients by [`clip_factor`] when the global norm exceeds `max_norm`.
+/// Returns the norm before clipping.
 pub fn clip_global_norm<M: Module>(
     module: &M,
     grads: &mut GradientsParams,
@@ -113,7 +123,7 @@ pub fn clip_global_norm<M: Module>(
 ) -> Result<f64> {
     let norm = grad_norm(module, grads);
     if norm.is_finite() && norm > max_norm {
-        let factor = (max_norm / (norm + 1e-6)) as f32;
+        let factor = clip_factor(norm, max_norm) as f32;
         module.visit(&mut Scale { grads, factor });
     }
     Ok(norm)

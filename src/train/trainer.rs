@@ -375,12 +375,7 @@ fn run_epoch(
                         format!("training diverged at {}: {}", at.describe(), at.kept())
                     })?;
                     finite.then(|| {
-                        let clip = cfg.train.grad_clip;
-                        let c = if norm > clip {
-                            clip / (norm + 1e-6)
-                        } else {
-                            1.0
-                        };
+                        let c = optim::clip_factor(norm, cfg.train.grad_clip);
                         optim::scale_grads(&st.model, &mut grads, (c / scale as f64) as f32);
                         grads
                     })
