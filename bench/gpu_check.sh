@@ -6,7 +6,8 @@
 # cuda and on flex to show the metrics agree (the bf16 one too: checkpoints are f32).
 # Prints train img/s beside data_wait_s (seconds an epoch waited for the loader thread:
 # near 0 when rendering and loading keep up with the GPU), epoch times and peak GPU
-# memory; fails fast (set -e, a time limit per step).
+# memory, and the loader's own images/s on the CPU (`bench loader`); fails fast (set -e, a
+# time limit per step).
 #
 #   bash bench/gpu_check.sh [OUT_DIR]        (default runs/gpu_check)
 #
@@ -63,6 +64,11 @@ for cfg in yolo_syn1000.toml maskrcnn_r50_syn750.toml; do
   peak_stop "$name"
   log "$name: $(rates "$OUT/$name")"
 done
+
+# What the data side produces on this machine's CPU cores, beside what the GPU consumed
+# above (the runs' train img/s): the training loader alone on yolo_syn1000's cached renders.
+log "loader alone, yolo_syn1000.toml (every core)"
+timeout 300 "$BIN" bench loader --config yolo_syn1000.toml --batches 40 | tee -a "$OUT/report.txt"
 
 # The speed question of train.precision: the same yolo_syn1000 epochs in bf16 (BF16=0 skips).
 if [ "${BF16:-1}" = 1 ]; then

@@ -159,7 +159,8 @@ enum Command {
         randomize: String,
     },
     /// Measure speed: `bench models` (model variants × sizes), `bench ablation` (what the
-    /// scene needs), `bench coco` (the COCO evaluator), `bench render` (the renderer).
+    /// scene needs), `bench coco` (the COCO evaluator), `bench render` (the renderer),
+    /// `bench loader` (the training loader).
     Bench {
         #[command(subcommand)]
         what: BenchWhat,
@@ -384,6 +385,21 @@ enum BenchWhat {
         #[arg(long, default_value = "none")]
         randomize: String,
     },
+    /// Training loader speed: a config's batches (read or render, augment, collate)
+    /// built as its run would, with no model; what a device can consume before it waits.
+    Loader {
+        #[arg(long, default_value = "quickstart.toml")]
+        config: String,
+        /// Override a config key (repeatable), e.g. data.fresh_synthetic=true.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Batches to time (they run on across epochs).
+        #[arg(long, default_value_t = 50)]
+        batches: usize,
+        /// Loader threads (default: every core).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
     /// Time load + evaluate + accumulate (bbox and segm) on a GT/DT pair.
     Coco {
         #[arg(long)]
@@ -418,6 +434,12 @@ impl BenchWhat {
     fn run(self) -> anyhow::Result<String> {
         match self {
             BenchWhat::Coco { gt, dt, repeats } => data::bench_coco(&gt, &dt, repeats),
+            BenchWhat::Loader {
+                config,
+                set,
+                batches,
+                threads,
+            } => bench_cmd::loader_cmd(&config, &set, batches, threads),
             BenchWhat::Render {
                 size,
                 images,

@@ -1,8 +1,8 @@
 //! Speed / accuracy measurements built on the rest of the crate: model variants × input
 //! sizes ([`models`]: parameters, GFLOPs, latency, training throughput, peak memory,
 //! checkpoint AP), the scene ablation ([`ablation`]), the randomisation / augmentation
-//! ablation scored on an external set ([`transfer`]) and flex vs tract inference latency
-//! ([`engines`]). Their parts: variant names
+//! ablation scored on an external set ([`transfer`]), flex vs tract inference latency
+//! ([`engines`]) and the training loader's rate alone ([`loader`]). Their parts: variant names
 //! ([`variant`]), one row's measurement ([`measure`]) in a fresh child process
 //! ([`worker`]), test AP of trained models ([`accuracy`]) and the CSV / markdown / PNG
 //! report ([`report`]), which goes through [`crate::eval::report`] and
@@ -12,6 +12,7 @@
 pub mod ablation;
 pub mod accuracy;
 pub mod engines;
+pub mod loader;
 pub mod measure;
 pub mod models;
 pub mod report;

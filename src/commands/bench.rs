@@ -177,6 +177,17 @@ pub fn transfer_cmd(r: TransferRequest) -> Result<String> {
     })
 }
 
+/// `chicktrain bench loader`: the report's lines.
+pub fn loader_cmd(
+    config: &str,
+    overrides: &[String],
+    batches: usize,
+    threads: Option<usize>,
+) -> Result<String> {
+    let cfg = config::load(config, overrides)?;
+    Ok(crate::bench::loader::bench_loader(&cfg, batches, threads)?.report(config))
+}
+
 /// `chicktrain bench model-worker`: one row, as a JSON line.
 pub fn model_worker(
     variant: &str,

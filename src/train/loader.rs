@@ -20,7 +20,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use crate::config::TrainConfig;
+use crate::config::{Config, TrainConfig};
 use crate::data::augment::{augment, augment_full, draw_partners, AugmentConfig, PartnerSamples};
 use crate::data::batch::{collate, Batch};
 use crate::data::dataset::{RealSet, Sample, SyntheticSet};
@@ -168,6 +168,27 @@ pub struct Loader {
 }
 
 impl Loader {
+    /// The loader a run of `cfg` trains with: its augmentations (`train.*`), inputs of
+    /// `input` px and the run's seed.
+    pub fn for_run(cfg: &Config, real: RealSet, synthetic: SyntheticSet, input: u32) -> Loader {
+        let t = &cfg.train;
+        Loader {
+            real,
+            synthetic,
+            aug: AugmentConfig {
+                degrees: t.degrees,
+                scale: t.scale,
+                translate: t.translate,
+                flipud: t.flipud,
+                mosaic: t.mosaic,
+                copy_paste: t.copy_paste,
+                ..AugmentConfig::basic(cfg.data.crop, t.fliplr, t.hsv)
+            },
+            input,
+            seed: cfg.seed,
+        }
+    }
+
     fn load(&self, it: Item, epoch: usize) -> Result<Sample> {
         match it {
             Item::Real(id) => self.real.sample(id, self.input),

@@ -101,6 +101,7 @@ mod tests {
                         bbox: IouStats { stats: bbox },
                         segm: IouStats { stats: segm },
                     }),
+                    val_time: None,
                 }
             })
             .collect();

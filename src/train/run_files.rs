@@ -77,6 +77,31 @@ pub struct EpochRecord {
     /// Validation stats; absent on epochs `train.val_every` skipped.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub val: Option<StatsRecord>,
+    /// Where the validation's time went; absent when the epoch was not validated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub val_time: Option<ValTime>,
+}
+
+/// Seconds of one epoch's validation: the whole of it (reading or fetching the images,
+/// forward passes, postprocess, masks and RLE at the original size, COCO matching) and
+/// the forward passes alone, so `total / forward` is what validation costs beyond the
+/// network. Fields in alphabetical order, as every key of the file.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ValTime {
+    /// The forward passes alone.
+    pub forward: f64,
+    /// The whole validation.
+    pub total: f64,
+}
+
+impl ValTime {
+    /// `total` seconds of wall clock with `timing`'s forward share.
+    pub fn of(total: f64, timing: &crate::train::evaluate::EvalTiming) -> ValTime {
+        ValTime {
+            forward: timing.forward,
+            total,
+        }
+    }
 }
 
 fn is_zero(n: &usize) -> bool {
@@ -255,6 +280,10 @@ mod tests {
                 bbox: IouStats { stats: [-1.0; 12] },
                 segm: IouStats { stats: segm },
             }),
+            val_time: Some(ValTime {
+                total: 2.5,
+                forward: 2.0,
+            }),
         }
     }
 
@@ -269,6 +298,7 @@ mod tests {
             "data_wait_s": 0.25, "epoch": 3, "lr": 0.01, "time": 12.0, "train_time": 10.0, "images_per_s": 6.5,
             "loss": {"seg": 0.1, "box": 1.5}, "proxy": true, "steps": 7,
             "val": {"bbox": {"stats": bbox}, "segm": {"stats": segm}},
+            "val_time": {"total": 2.5, "forward": 2.0},
         });
         assert_eq!(json(&r), serde_json::to_string(&untyped).unwrap());
         let t = TestRecord {
@@ -320,6 +350,7 @@ mod tests {
         // An epoch without validation: no `val` key, `null` val cells, never the best.
         let mut skipped = record(5, 0.9);
         skipped.val = None;
+        skipped.val_time = None;
         let line = json(&skipped);
         assert!(!line.contains("val"), "{line}");
         write_metrics(&dir, &[recs[0].clone(), skipped.clone()], &["box"]).unwrap();

@@ -19,17 +19,16 @@ use burn::tensor::{Device, FloatDType, Tensor, TensorData};
 
 use crate::annotations::split::Split;
 use crate::config::{Config, DeviceKind};
-use crate::data::augment::AugmentConfig;
 use crate::data::dataset::{RealSet, SyntheticSet};
 
 use super::checkpoint::{module_bytes, Checkpoint, Header, Stats, FORMAT};
 use super::detector::DetectorConfig;
 use super::device::device_with;
 use super::divergence::{check_weights, At, DivergenceGuard};
-use super::evaluate::evaluate_ids;
+use super::evaluate::{evaluate_ids, InputCache};
 use super::loader::{epoch_batches, mix, Loader, Mix};
 use super::precision::{copy_in, float_dtype, graph_cast};
-use super::run_files::{self, EpochRecord, StatsRecord, TestRecord};
+use super::run_files::{self, EpochRecord, StatsRecord, TestRecord, ValTime};
 use super::schedule::step_lr;
 use super::smoke::smoke_config;
 use super::state::TrainState;
@@ -162,6 +161,9 @@ struct Run<'a> {
     base: &'a Device,
     /// Network input size.
     input: usize,
+    /// The validation images letterboxed once, at the first validation (`None` inside:
+    /// too many to keep, read each time).
+    val_inputs: std::sync::OnceLock<Option<InputCache>>,
 }
 
 impl Run<'_> {
@@ -221,18 +223,29 @@ impl Run<'_> {
         let eval_model = st.eval_model(cfg.train.ema);
         let validate = (epoch + 1) % cfg.train.val_every == 0 || epoch + 1 == cfg.train.epochs;
         let val = if validate {
-            Some(
-                evaluate_ids(
-                    &copy_in(&eval_model, float_dtype(cfg.train.precision)),
-                    self.real,
-                    &self.split.val,
-                    self.input,
-                    self.base,
-                )?
-                .stats,
-            )
+            let t0 = Instant::now();
+            let cache = match self.val_inputs.get() {
+                Some(c) => c.as_ref(),
+                None => {
+                    let c = InputCache::load(self.real, &self.split.val, self.input)?;
+                    self.val_inputs.get_or_init(|| c).as_ref()
+                }
+            };
+            let ev = evaluate_ids(
+                &copy_in(&eval_model, float_dtype(cfg.train.precision)),
+                self.real,
+                &self.split.val,
+                self.input,
+                self.base,
+                cache,
+            )?;
+            Some((ev, t0.elapsed().as_secs_f64()))
         } else {
             None
+        };
+        let (val, val_time) = match val {
+            Some((ev, secs)) => (Some(ev.stats), Some(ValTime::of(secs, &ev.timing))),
+            None => (None, None),
         };
         let n = steps.steps.max(1) as f64;
         st.records.push(EpochRecord {
@@ -252,6 +265,7 @@ impl Run<'_> {
             time: te.elapsed().as_secs_f64(),
             train_time: t_train,
             val: val.as_ref().map(StatsRecord::from),
+            val_time,
         });
         run_files::write_metrics(self.run_dir, &st.records, loss_names)?;
 
@@ -420,8 +434,16 @@ fn epoch_line(rec: &EpochRecord, epochs: usize, loss_names: &[&str], improved: b
     let val = match &rec.val {
         Some(v) => {
             let (b, s) = (&v.bbox.stats, &v.segm.stats);
+            let cost = match &rec.val_time {
+                Some(t) => format!(
+                    " ({:.1} s, {:.2}× forward)",
+                    t.total,
+                    t.total / t.forward.max(1e-9)
+                ),
+                None => String::new(),
+            };
             format!(
-                "val bbox AP {:.3} AP50 {:.3}  segm AP {:.3} AP50 {:.3}",
+                "val{cost} bbox AP {:.3} AP50 {:.3}  segm AP {:.3} AP50 {:.3}",
                 b[0], b[1], s[0], s[1]
             )
         }
@@ -530,22 +552,9 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         class_names: real.class_names(),
         base: &base,
         input,
+        val_inputs: Default::default(),
     };
-    let loader = Loader {
-        real: real.clone(),
-        synthetic,
-        aug: AugmentConfig {
-            degrees: cfg.train.degrees,
-            scale: cfg.train.scale,
-            translate: cfg.train.translate,
-            flipud: cfg.train.flipud,
-            mosaic: cfg.train.mosaic,
-            copy_paste: cfg.train.copy_paste,
-            ..AugmentConfig::basic(cfg.data.crop, cfg.train.fliplr, cfg.train.hsv)
-        },
-        input: input as u32,
-        seed: cfg.seed,
-    };
+    let loader = Loader::for_run(&cfg, real.clone(), synthetic, input as u32);
     let (mut train_imgs, mut train_secs) = (0usize, 0f64);
     let guard_names: Vec<&str> = loss_names.iter().copied().chain(["total"]).collect();
     let mut guard = DivergenceGuard::new(&guard_names);
@@ -593,7 +602,7 @@ fn test_best(run: &Run) -> Result<(Stats, usize)> {
     let best = Checkpoint::load(&run.run_dir.join("best.bpk"))?;
     let model = best.model("ema", run.base)?;
     let input = best.header.model.input_size();
-    let test = evaluate_ids(&model, run.real, &run.split.test, input, run.base)?.stats;
+    let test = evaluate_ids(&model, run.real, &run.split.test, input, run.base, None)?.stats;
     run_files::write_test(
         run.run_dir,
         &TestRecord {
@@ -736,6 +745,20 @@ mod tests {
         let last = Checkpoint::load(&run.join("last.bpk")).unwrap();
         assert_eq!(last.header.epoch, 3);
         assert!(run.join("plots.png").is_file());
+        // Epoch 3 validated from the inputs kept at epoch 2 (`InputCache`): scoring its
+        // checkpoint afresh, every image read again, gives the same stats bit for bit.
+        let timed: Vec<bool> = recs.iter().map(|r| r.val_time.is_some()).collect();
+        assert_eq!(timed, [false, true, true]);
+        let again = crate::train::evaluate::score_checkpoint(
+            &run.join("last.bpk"),
+            crate::train::evaluate::SplitName::Val,
+            None,
+            None,
+        )
+        .unwrap();
+        let logged = recs[2].val.as_ref().unwrap();
+        assert_eq!(again.stats.bbox, logged.bbox.stats);
+        assert_eq!(again.stats.segm, logged.segm.stats);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -794,14 +817,32 @@ mod tests {
                 bbox: IouStats { stats: [0.25; 12] },
                 segm: IouStats { stats: segm },
             }),
+            val_time: None,
         };
+        let timed = EpochRecord {
+            val_time: Some(ValTime {
+                total: 1.5,
+                forward: 1.25,
+            }),
+            ..rec.clone()
+        };
+        assert!(
+            epoch_line(&timed, 25, &["box", "seg"], false)
+                .contains("val (1.5 s, 1.20× forward) bbox AP 0.250"),
+            "{}",
+            epoch_line(&timed, 25, &["box", "seg"], false)
+        );
         let line = epoch_line(&rec, 25, &["box", "seg"], true);
         assert_eq!(
             line,
             "epoch 3/25  lr 1.00e-2  loss box 1.250 seg 0.500  12.0 s (6.50 img/s, 0.5 s data wait)  val bbox AP 0.250 AP50 0.250  segm AP 0.500 AP50 0.750  *best"
         );
         assert!(!epoch_line(&rec, 25, &["box", "seg"], false).contains("best"));
-        let skipped = EpochRecord { val: None, ..rec };
+        let skipped = EpochRecord {
+            val: None,
+            val_time: None,
+            ..rec
+        };
         assert_eq!(
             epoch_line(&skipped, 25, &["box", "seg"], false),
             "epoch 3/25  lr 1.00e-2  loss box 1.250 seg 0.500  12.0 s (6.50 img/s, 0.5 s data wait)  not validated (train.val_every)"
