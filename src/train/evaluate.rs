@@ -4,6 +4,7 @@
 //! back to each image's original size and masks decoded there (inside their boxes only),
 //! masks as compressed RLE, then the in-tree pycocotools-exact evaluator for bbox and segm.
 
+use std::borrow::Cow;
 use std::path::Path;
 use std::time::Instant;
 
@@ -164,20 +165,22 @@ impl InputCache {
         }))
     }
 
-    /// Image `id` letterboxed to `input` and its original size: from the cache when it
-    /// holds it at that size, else read from `set`.
-    fn image(
-        cache: Option<&InputCache>,
+    /// Image `id` letterboxed to `input` and its original size: borrowed from the cache
+    /// when it holds it at that size, else read from `set`.
+    fn image<'a>(
+        cache: Option<&'a InputCache>,
         set: &RealSet,
         id: u64,
         input: u32,
-    ) -> Result<(image::RgbImage, (u32, u32))> {
+    ) -> Result<(Cow<'a, image::RgbImage>, (u32, u32))> {
         match cache
             .filter(|c| c.size == input)
             .and_then(|c| c.images.get(&id))
         {
-            Some((img, orig)) => Ok((img.clone(), *orig)),
-            None => set.image(id, input),
+            Some((img, orig)) => Ok((Cow::Borrowed(img), *orig)),
+            None => set
+                .image(id, input)
+                .map(|(img, orig)| (Cow::Owned(img), orig)),
         }
     }
 }

@@ -94,16 +94,6 @@ pub struct ValTime {
     pub total: f64,
 }
 
-impl ValTime {
-    /// `total` seconds of wall clock with `timing`'s forward share.
-    pub fn of(total: f64, timing: &crate::train::evaluate::EvalTiming) -> ValTime {
-        ValTime {
-            forward: timing.forward,
-            total,
-        }
-    }
-}
-
 fn is_zero(n: &usize) -> bool {
     *n == 0
 }

@@ -222,7 +222,7 @@ impl Run<'_> {
         }
         let eval_model = st.eval_model(cfg.train.ema);
         let validate = (epoch + 1) % cfg.train.val_every == 0 || epoch + 1 == cfg.train.epochs;
-        let val = if validate {
+        let (val, val_time) = if validate {
             let t0 = Instant::now();
             let cache = match self.val_inputs.get() {
                 Some(c) => c.as_ref(),
@@ -239,13 +239,13 @@ impl Run<'_> {
                 self.base,
                 cache,
             )?;
-            Some((ev, t0.elapsed().as_secs_f64()))
+            let time = ValTime {
+                forward: ev.timing.forward,
+                total: t0.elapsed().as_secs_f64(),
+            };
+            (Some(ev.stats), Some(time))
         } else {
-            None
-        };
-        let (val, val_time) = match val {
-            Some((ev, secs)) => (Some(ev.stats), Some(ValTime::of(secs, &ev.timing))),
-            None => (None, None),
+            (None, None)
         };
         let n = steps.steps.max(1) as f64;
         st.records.push(EpochRecord {
