@@ -1,5 +1,5 @@
 #!/bin/sh
-# Regenerates every timing table of BENCHMARKS.md into bench/results/ (about 20 min on
+# Regenerates every timing table of BENCHMARKS.md into bench/results/ (about 25 min on
 # the 2-core dev box when nothing else runs; run it on a quiet machine). AP columns come
 # from the finished trainings of bench/cpu_protocol_runs.sh (deterministic, any load).
 #
@@ -30,7 +30,8 @@ fi
 #    bench/requirements.txt), or the interpreter named by $PYTHON.
 PY=${PYTHON:-.venv/bin/python}
 if command -v "$PY" > /dev/null 2>&1; then
-  "$PY" bench/ultralytics_yolo.py 256 320 640 > $R/ultralytics_yolo.txt 2>&1 || true
+  # The speed table (chicktrain, tract, ultralytics / PyTorch, ONNX Runtime; ~5 min).
+  PYTHON="$PY" bench/speed_table.sh "$CT" $R/speed > /dev/null || true
   THREADS=$(nproc) RUNS=2 "$PY" tests/fixtures/maskrcnn/bench_torchvision.py \
     50:256,50:512,101:512 > $R/torchvision_maskrcnn.txt 2>&1 || true
 else

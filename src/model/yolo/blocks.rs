@@ -475,6 +475,55 @@ mod tests {
         assert_eq!(c.macs([64, 64]), ((16 * 32 * 9 * 32 * 32) as u64, [32, 32]));
     }
 
+    /// flex's unary ops run split over the rayon pool for large tensors (the patch in
+    /// vendor/burn-flex); the split must not change a bit. Every element of SiLU's sigmoid
+    /// against upstream's scalar formula, on the in-place path (a tensor nobody else holds),
+    /// the allocating path (SiLU's `x * sigmoid(x)` keeps `x`) and a transposed view, on a
+    /// four-thread pool so the split happens on any machine.
+    #[test]
+    fn sigmoid_split_over_threads_is_bit_exact() {
+        use burn::tensor::activation::sigmoid;
+        use burn::tensor::{Distribution, TensorData};
+        let reference = |v: f32| {
+            if v >= 0.0 {
+                1.0 / (1.0 + (-v).exp())
+            } else {
+                let e = v.exp();
+                e / (1.0 + e)
+            }
+        };
+        let d = dev();
+        let check = |got: Tensor<4>, input: &[f32], what: &str| {
+            let got: Vec<f32> = got.into_data().try_to_vec::<f32>().unwrap();
+            assert_eq!(got.len(), input.len());
+            for (i, (g, &v)) in got.iter().zip(input).enumerate() {
+                assert_eq!(
+                    g.to_bits(),
+                    reference(v).to_bits(),
+                    "{what}: element {i} of {v}"
+                );
+            }
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            // 2·8·48·56 = 43008 elements: above the split threshold, not a multiple of the chunk.
+            let x = Tensor::<4>::random([2, 8, 48, 56], Distribution::Normal(0.0, 6.0), &d);
+            let host: Vec<f32> = x.to_data().try_to_vec::<f32>().unwrap();
+            let fresh =
+                || Tensor::<4>::from_data(TensorData::new(host.clone(), [2, 8, 48, 56]), &d);
+            check(sigmoid(fresh()), &host, "in place");
+            let kept = fresh();
+            check(sigmoid(kept.clone()), &host, "allocating");
+            drop(kept);
+            let t = fresh().swap_dims(1, 3);
+            let t_host: Vec<f32> = t.to_data().try_to_vec::<f32>().unwrap();
+            check(sigmoid(t), &t_host, "transposed");
+        });
+    }
+
     #[test]
     #[should_panic(expected = "dim 48 must be a positive multiple of num_heads 5")]
     fn attention_rejects_bad_heads() {

@@ -55,8 +55,8 @@ where
 /// Apply a unary operation element-wise to a tensor.
 pub fn unary_op<F32Op, F64Op>(tensor: FlexTensor, f32_op: F32Op, f64_op: F64Op) -> FlexTensor
 where
-    F32Op: Fn(f32) -> f32 + Copy,
-    F64Op: Fn(f64) -> f64 + Copy,
+    F32Op: Fn(f32) -> f32 + Copy + Send + Sync,
+    F64Op: Fn(f64) -> f64 + Copy + Send + Sync,
 {
     let dtype = tensor.dtype();
 
@@ -69,11 +69,70 @@ where
     }
 }
 
+/// Below this many elements a unary op runs on the calling thread: splitting costs more
+/// than it saves. (chicktrain patch, see vendor/burn-flex/PATCH.md)
+#[cfg(feature = "rayon")]
+const PAR_UNARY_MIN: usize = 1 << 14;
+
+/// `x = op(x)` over a slice, split over the rayon pool for large slices. Every element is
+/// computed by the same scalar `op` either way, so the result is bit-identical to the
+/// serial loop; only the wall time changes. Upstream ran every unary op (`exp`,
+/// `sigmoid`, `tanh`, …) on one thread, so SiLU's `exp` left the other cores idle.
+/// (chicktrain patch, see vendor/burn-flex/PATCH.md)
+fn map_inplace<E, Op>(xs: &mut [E], op: &Op)
+where
+    E: Copy + Send + Sync,
+    Op: Fn(E) -> E + Send + Sync,
+{
+    #[cfg(feature = "rayon")]
+    if xs.len() >= PAR_UNARY_MIN && rayon::current_num_threads() > 1 {
+        use rayon::prelude::*;
+        xs.par_chunks_mut(par_chunk(xs.len())).for_each(|c| {
+            for x in c.iter_mut() {
+                *x = op(*x);
+            }
+        });
+        return;
+    }
+    for x in xs.iter_mut() {
+        *x = op(*x);
+    }
+}
+
+/// `op` of every element of `src` into a new vector, in order: the allocating twin of
+/// [`map_inplace`] (an input that is shared, e.g. SiLU's `x * sigmoid(x)`, cannot be
+/// overwritten). (chicktrain patch, see vendor/burn-flex/PATCH.md)
+fn map_to_vec<E, Op>(src: &[E], op: &Op) -> Vec<E>
+where
+    E: Copy + Send + Sync,
+    Op: Fn(E) -> E + Send + Sync,
+{
+    #[cfg(feature = "rayon")]
+    if src.len() >= PAR_UNARY_MIN && rayon::current_num_threads() > 1 {
+        use rayon::prelude::*;
+        let mut out = Vec::with_capacity(src.len());
+        src.par_iter()
+            .with_min_len(par_chunk(src.len()))
+            .map(|&x| op(x))
+            .collect_into_vec(&mut out);
+        return out;
+    }
+    src.iter().map(|&x| op(x)).collect()
+}
+
+/// Chunk length for the parallel unary loops: about four chunks per thread, so a busy
+/// thread does not hold the others up. (chicktrain patch)
+#[cfg(feature = "rayon")]
+fn par_chunk(n: usize) -> usize {
+    n.div_ceil(4 * rayon::current_num_threads())
+        .max(PAR_UNARY_MIN / 4)
+}
+
 /// Generic unary operation for any element type.
 fn unary_op_typed<E, Op>(mut tensor: FlexTensor, op: Op) -> FlexTensor
 where
     E: burn_backend::Element + bytemuck::Pod,
-    Op: Fn(E) -> E,
+    Op: Fn(E) -> E + Send + Sync,
 {
     let n = tensor.layout().num_elements();
 
@@ -81,9 +140,7 @@ where
     if tensor.is_unique() && tensor.layout().is_contiguous() && tensor.layout().start_offset() == 0
     {
         let storage: &mut [E] = tensor.storage_mut();
-        for x in storage[..n].iter_mut() {
-            *x = op(*x);
-        }
+        map_inplace(&mut storage[..n], &op);
         return tensor;
     }
 
@@ -98,7 +155,7 @@ where
     // Iterate in storage order (contiguous) and preserve original layout.
     // Only valid when all strides are positive.
     if !has_negative_strides && layout.start_offset() == 0 && src.len() == n {
-        let result: Vec<E> = src.iter().map(|&x| op(x)).collect();
+        let result: Vec<E> = map_to_vec(src, &op);
         let bytes = Bytes::from_elems(result);
         return FlexTensor::new(bytes, layout, E::dtype());
     }
