@@ -3,7 +3,7 @@
 # column from one run on one machine: chicktrain's yolo-n on flex (latency, training
 # img/s, peak RSS), the same weights' ONNX export in tract, ultralytics YOLO11n-seg in
 # PyTorch (latency, training, peak RSS), and ONNX Runtime on both ONNX files (chicktrain's
-# export and ultralytics' own). About 6 min on the 2-core dev box; run it on a quiet machine.
+# export and ultralytics' own). About 5 min on the 2-core dev box; run it on a quiet machine.
 #
 # Usage: bench/speed_table.sh [path/to/chicktrain] [OUT]   (from the repository root;
 # PYTHON=... names the interpreter of the venv of bench/requirements.txt, default
