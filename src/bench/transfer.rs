@@ -429,7 +429,8 @@ mod tests {
                 "no-hsv",
                 "no-degrees",
                 "no-scale",
-                "no-flipud"
+                "no-flipud",
+                "no-copy-paste"
             ]
         );
         let ov: Vec<String> = [
@@ -473,7 +474,8 @@ mod tests {
                 "no-hsv",
                 "no-degrees",
                 "no-scale",
-                "no-flipud"
+                "no-flipud",
+                "no-copy-paste"
             ]
         );
     }
