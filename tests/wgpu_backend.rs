@@ -78,8 +78,10 @@ fn wgpu_and_flex_train_alike_and_read_each_others_checkpoints() {
     let on_wgpu = smoke_run(&root, "wgpu", DeviceKind::Wgpu);
     let on_flex = smoke_run(&root, "flex", DeviceKind::Flex);
 
-    // Same data, seed and steps: the first epoch's mean losses agree closely (they part
-    // slowly as rounding differences compound through the updates).
+    // Same initial weights (drawn on the CPU from the seed, whatever the device), data and
+    // steps: the first epoch's mean losses agree closely (they part slowly as rounding
+    // differences compound through the updates). Before the weights were drawn on the CPU,
+    // each backend's generator gave its own, and this held only by chance.
     let (a, b) = (
         read_metrics(&on_wgpu, 1).unwrap(),
         read_metrics(&on_flex, 1).unwrap(),

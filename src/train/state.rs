@@ -21,6 +21,22 @@ use super::precision::cast_module;
 use super::run_files::{self, EpochRecord};
 use crate::model::freeze::freeze;
 
+/// A new model of `mcfg` on `device` whose weights are drawn on the CPU (`flex`) from
+/// `seed`: a config and seed start from the same weights on every backend (as PyTorch
+/// draws them on the CPU before `.to(device)`), so a `wgpu` or `cuda` run is the same
+/// experiment as a `flex` one; each backend's own generator would draw other weights.
+/// The device's generator still advances as if it had drawn them (the model is first built
+/// there), so on `flex` the weights and later draws are what they were before this existed.
+pub fn seeded_init(mcfg: &DetectorConfig, seed: u64, device: &Device) -> Result<Detector> {
+    let model = mcfg.init(device);
+    let cpu = Device::flex();
+    cpu.seed(seed);
+    let drawn = mcfg.init(&cpu).into_record();
+    model
+        .try_load_record(drawn)
+        .map_err(|e| anyhow::anyhow!("cannot move the initial weights to {device:?}: {e}"))
+}
+
 /// Weights, EMA and optimiser of a run, and how far it got.
 pub struct TrainState {
     pub model: Detector,
@@ -60,7 +76,7 @@ impl TrainState {
         let f16 = cfg.train.precision == crate::config::Precision::F16;
         let Some(ck) = resume else {
             // f32 master weights whatever the run's precision (`precision`).
-            let mut model = cast_module(mcfg.init(ad), FloatDType::F32);
+            let mut model = cast_module(seeded_init(mcfg, cfg.seed, ad)?, FloatDType::F32);
             if let Some(p) = cfg.model.init() {
                 let (m, note) = load_init(model, &mcfg, Path::new(p), base)?;
                 say(note);
@@ -131,5 +147,50 @@ impl TrainState {
                 ("optim".into(), optim_bytes(&self.optim)?),
             ],
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::yolo::{Scale, YoloSegConfig};
+    use crate::util::tensor::to_host;
+    use burn::tensor::{Tensor, TensorData};
+
+    /// The YOLO prototypes and box logits of `m` for a fixed 32 px input, on the host.
+    fn outputs(m: Detector, dev: &Device) -> Vec<f32> {
+        let Detector::Yolo(m) = m else { unreachable!() };
+        let px: Vec<f32> = (0..3 * 32 * 32).map(|i| (i % 7) as f32 / 7.0).collect();
+        let o = m.forward(Tensor::<4>::from_data(
+            TensorData::new(px, [1, 3, 32, 32]),
+            dev,
+        ));
+        let mut v = to_host(o.box_dist);
+        v.extend(to_host(o.proto));
+        v
+    }
+
+    #[test]
+    #[allow(deprecated)] // Device::ndarray: a second backend with its own generator.
+    fn initial_weights_follow_the_seed_not_the_backend() {
+        let mcfg = DetectorConfig::Yolo(
+            YoloSegConfig::new(Scale::N, 1)
+                .with_input_size(32)
+                .with_width_mult(0.25)
+                .with_num_masks(4),
+        );
+        let out = |seed, dev: &Device| outputs(seeded_init(&mcfg, seed, dev).unwrap(), dev);
+        let flex = Device::flex();
+        let on_flex = out(7, &flex);
+        let close = |a: &[f32], b: &[f32]| {
+            a.iter()
+                .zip(b)
+                .all(|(x, y)| (x - y).abs() <= 1e-5 * (1.0 + x.abs()))
+        };
+        assert!(close(&on_flex, &out(7, &Device::ndarray())));
+        // On the training (autodiff) device, in eval mode (BatchNorm's running statistics).
+        let trained = seeded_init(&mcfg, 7, &flex.clone().autodiff()).unwrap();
+        assert!(close(&on_flex, &outputs(trained.valid(), &flex)));
+        assert!(!close(&on_flex, &out(8, &flex)));
     }
 }
