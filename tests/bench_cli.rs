@@ -255,6 +255,27 @@ fn smoke_sweep_reports_two_settings_and_resumes() {
         ]),
         "no finished run",
     );
+    // A setting valid only with synthetic images (train.real_fraction) is checked with each
+    // count the sweep runs, not with the config's own data.synthetic.
+    let mixed = |syn: &str, out: &str| {
+        run(&[
+            "sweep",
+            "--config",
+            "quickstart.toml",
+            "--syn",
+            syn,
+            "--no-train",
+            "--set",
+            "data.synthetic=0",
+            "--set",
+            "train.real_fraction=0.5",
+            "--out",
+            d.join(out).to_str().unwrap(),
+        ])
+    };
+    assert_clean_error(&mixed("2", "mixed"), "no finished run");
+    let zero = mixed("2,0", "mixed0");
+    common::assert_clean_error(&zero, &["--syn 0", "real_fraction"]);
     assert_clean_error(
         &run(&["sweep", "--config", "quickstart.toml", "--syn", "0,abc"]),
         "abc",

@@ -25,12 +25,10 @@ mkdir -p "$OUT"
 COMMON=(--config bench/crossdomain/fewshot.toml --seeds 3 --quiet
   --set "train.steps_per_epoch=$STEPS" --set "train.epochs=$EPOCHS"
   --set train.degrees=180 --set train.flipud=0.5 --set train.scale=0.25 "$@")
-# data.synthetic is set as well as --syn: the config is validated before the sweep applies
-# its counts, and real_fraction needs synthetic images.
 RAYON_NUM_THREADS=1 "$BIN" sweep --syn 0 --out "$OUT/real" "${COMMON[@]}" > "$OUT/real.md" &
 real=$!
 RAYON_NUM_THREADS=1 "$BIN" sweep --syn 400 --out "$OUT/mix" "${COMMON[@]}" \
-  --set data.synthetic=400 --set train.real_fraction=0.5 > "$OUT/mix.md" &
+  --set train.real_fraction=0.5 > "$OUT/mix.md" &
 mix=$!
 wait "$real"
 wait "$mix"

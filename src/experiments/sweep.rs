@@ -253,7 +253,22 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
     if o.synthetic.is_empty() {
         bail!("--syn names no synthetic-image count");
     }
-    let base = config::load(&o.config, &o.overrides)?;
+    // Each count's config is validated before anything trains, as it will run: with its
+    // `data.synthetic` (a setting such as `train.real_fraction` needs synthetic images, so
+    // the config as given may be invalid alone and valid for every count of the sweep).
+    let with_count = |n: usize| {
+        let mut set = o.overrides.clone();
+        set.push(format!("data.synthetic={n}"));
+        set
+    };
+    let mut per_count = Vec::new();
+    for &n in &o.synthetic {
+        per_count.push(
+            config::load(&o.config, &with_count(n))
+                .with_context(|| format!("--syn {n}: the config with data.synthetic = {n}"))?,
+        );
+    }
+    let base = per_count.swap_remove(0);
     let mut name = base.name.clone();
     if o.smoke {
         let mut c = base.clone();
@@ -290,8 +305,7 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
                 missing.push(format!("syn{n}_seed{seed}"));
                 continue;
             }
-            let mut set = o.overrides.clone();
-            set.push(format!("data.synthetic={n}"));
+            let mut set = with_count(n);
             set.push(format!("seed={seed}"));
             let cfg = config::load(&o.config, &set)?;
             let last = dir.join("last.bpk");
