@@ -256,19 +256,17 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
     // Each count's config is validated before anything trains, as it will run: with its
     // `data.synthetic` (a setting such as `train.real_fraction` needs synthetic images, so
     // the config as given may be invalid alone and valid for every count of the sweep).
-    let with_count = |n: usize| {
-        let mut set = o.overrides.clone();
-        set.push(format!("data.synthetic={n}"));
-        set
-    };
+    // Each run is its count's config with the run's seed.
     let mut per_count = Vec::new();
     for &n in &o.synthetic {
+        let mut set = o.overrides.clone();
+        set.push(format!("data.synthetic={n}"));
         per_count.push(
-            config::load(&o.config, &with_count(n))
+            config::load(&o.config, &set)
                 .with_context(|| format!("--syn {n}: the config with data.synthetic = {n}"))?,
         );
     }
-    let base = per_count.swap_remove(0);
+    let base = &per_count[0];
     let mut name = base.name.clone();
     if o.smoke {
         let mut c = base.clone();
@@ -287,7 +285,7 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
     let mut results = Vec::new();
     let mut missing = Vec::new();
     let total = o.synthetic.len() * o.seeds;
-    for &n in &o.synthetic {
+    for (&n, count_cfg) in o.synthetic.iter().zip(&per_count) {
         for k in 0..o.seeds as u64 {
             let seed = base.seed + k;
             let dir = out.join(format!("syn{n}_seed{seed}"));
@@ -305,9 +303,8 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
                 missing.push(format!("syn{n}_seed{seed}"));
                 continue;
             }
-            let mut set = with_count(n);
-            set.push(format!("seed={seed}"));
-            let cfg = config::load(&o.config, &set)?;
+            let mut cfg = count_cfg.clone();
+            cfg.seed = seed;
             let last = dir.join("last.bpk");
             let resume = last.exists()
                 && Checkpoint::load(&last).is_ok_and(|c| {
