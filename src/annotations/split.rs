@@ -48,6 +48,19 @@ impl Split {
         })
     }
 
+    /// Keeps `n` of the train ids, drawn by the split's seed (all when there are no more
+    /// than `n`); val and test are untouched, so runs over several `n` share them.
+    pub fn limit_train(&mut self, n: usize) {
+        if n >= self.train.len() {
+            return;
+        }
+        // A stream apart from the split's own shuffle.
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x7EA1_11D1);
+        self.train.shuffle(&mut rng);
+        self.train.truncate(n);
+        self.train.sort_unstable();
+    }
+
     pub fn save(&self, path: &Path) -> Result<()> {
         crate::util::write_atomic(path, serde_json::to_string_pretty(self)?.as_bytes())
     }
@@ -67,5 +80,26 @@ mod tests {
         let mut all: Vec<u64> = [s.train, s.val, s.test].concat();
         all.sort_unstable();
         assert_eq!(all, ids);
+    }
+
+    #[test]
+    fn limit_train_keeps_a_seeded_subset_and_leaves_val_and_test() {
+        let ids: Vec<u64> = (1..=120).collect();
+        let full = Split::new(&ids, [0.2, 0.2], 3).unwrap();
+        let mut six = full.clone();
+        six.limit_train(6);
+        assert_eq!(six.train.len(), 6);
+        assert!(six.train.iter().all(|i| full.train.contains(i)));
+        assert!(six.train.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!((&six.val, &six.test), (&full.val, &full.test));
+        // Not simply the lowest ids, and the same for the same seed.
+        assert_ne!(six.train, full.train[..6].to_vec());
+        let mut again = full.clone();
+        again.limit_train(6);
+        assert_eq!(again, six);
+        // More than there are: all of them.
+        let mut all = full.clone();
+        all.limit_train(1000);
+        assert_eq!(all, full);
     }
 }

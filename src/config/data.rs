@@ -54,6 +54,11 @@ pub struct DataConfig {
     /// `[0, 0]` makes every image test: a set to score with `eval --data`, not to train on.
     #[serde(default = "default_split")]
     pub split: [f64; 2],
+    /// Train on only N of the split's train images (drawn by the seed), val and test as
+    /// split (ultralytics' `fraction`, as a count): a few-shot curve over N keeps one
+    /// test set. None = the whole train split.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train_limit: Option<usize>,
     /// Synthetic images mixed into training (paper: 0, 250, 500, 750, 1000).
     #[serde(default)]
     pub synthetic: usize,
@@ -117,6 +122,9 @@ impl DataConfig {
         let all_test = ft == 0.0 && fv == 0.0;
         if !(all_test || (ft > 0.0 && fv > 0.0 && ft + fv < 1.0)) {
             bail!("data.split = [{ft}, {fv}] must be two positive fractions (train, val) summing to less than 1, or [0, 0] (every image is test: for `eval --data` on an external set)");
+        }
+        if d.train_limit == Some(0) {
+            bail!("data.train_limit = 0 leaves no real train image (leave it out to train on the whole train split)");
         }
         if d.real.limit.is_some_and(|l| l < 3) {
             bail!(

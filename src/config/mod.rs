@@ -275,6 +275,11 @@ mod tests {
             ),
             (
                 base.to_string(),
+                vec!["data.train_limit=0".into()],
+                "data.train_limit = 0",
+            ),
+            (
+                base.to_string(),
                 vec!["train.mosaic=1.5".into()],
                 "train.mosaic = 1.5",
             ),

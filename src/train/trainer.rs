@@ -131,7 +131,13 @@ fn load_data(
     let real = RealSet::load(&cfg.data, cfg.seed)?;
     let split = match resume {
         Some(ck) => ck.header.split.clone(),
-        None => Split::new(&real.ids(), cfg.data.split, cfg.seed)?,
+        None => {
+            let mut s = Split::new(&real.ids(), cfg.data.split, cfg.seed)?;
+            if let Some(n) = cfg.data.train_limit {
+                s.limit_train(n);
+            }
+            s
+        }
     };
     if split.train.is_empty() || split.val.is_empty() || split.test.is_empty() {
         bail!(
@@ -688,6 +694,18 @@ mod tests {
         assert_eq!(split.train.len() + split.val.len() + split.test.len(), 4);
         assert!(dir.join("split.json").is_file());
         assert_eq!(synthetic.count, 0);
+        // data.train_limit keeps a subset of the train split, val and test as split.
+        let ten = ["data.real.count=10", "data.split=[0.6, 0.2]"];
+        let (_, full, _) = load_data(&tiny(&dir, &ten), &dir, None).unwrap();
+        let (_, two, _) = load_data(
+            &tiny(&dir, &[ten[0], ten[1], "data.train_limit=2"]),
+            &dir,
+            None,
+        )
+        .unwrap();
+        assert_eq!((full.train.len(), two.train.len()), (6, 2));
+        assert!(two.train.iter().all(|i| full.train.contains(i)));
+        assert_eq!((&two.val, &two.test), (&full.val, &full.test));
         // `[0, 0]` is an evaluation set (every image test), not something to train on.
         let e = load_data(&tiny(&dir, &["data.split=[0.0, 0.0]"]), &dir, None).unwrap_err();
         let e = format!("{e:#}");
