@@ -12,6 +12,8 @@
 #   bench/crossdomain/equal_steps.sh target/release/chicktrain runs/fs_short 16 15    # 240 steps
 #   bench/crossdomain/equal_steps.sh target/release/chicktrain runs/fs_long 50 20 \
 #       --set train.val_every=4                                                      # 1000 steps
+#   bench/crossdomain/equal_steps.sh target/release/chicktrain runs/fs_n1 16 15 \
+#       --set data.train_limit=1                            # 1 of the 24 real train images
 #
 # Time on the 2-core box: ~40 min for 240 steps, ~2 h for 1000 steps (three seeds).
 set -euo pipefail

@@ -48,6 +48,21 @@ impl Split {
         })
     }
 
+    /// The split a training run uses: [`Split::new`], then at most `train_limit` of its
+    /// train ids ([`Split::limit_train`]). The trainer and `bench loader` both call it.
+    pub fn for_training(
+        ids: &[u64],
+        fractions: [f64; 2],
+        seed: u64,
+        train_limit: Option<usize>,
+    ) -> Result<Split> {
+        let mut s = Split::new(ids, fractions, seed)?;
+        if let Some(n) = train_limit {
+            s.limit_train(n);
+        }
+        Ok(s)
+    }
+
     /// Keeps `n` of the train ids, drawn by the split's seed (all when there are no more
     /// than `n`); val and test are untouched, so runs over several `n` share them.
     pub fn limit_train(&mut self, n: usize) {

@@ -131,13 +131,7 @@ fn load_data(
     let real = RealSet::load(&cfg.data, cfg.seed)?;
     let split = match resume {
         Some(ck) => ck.header.split.clone(),
-        None => {
-            let mut s = Split::new(&real.ids(), cfg.data.split, cfg.seed)?;
-            if let Some(n) = cfg.data.train_limit {
-                s.limit_train(n);
-            }
-            s
-        }
+        None => Split::for_training(&real.ids(), cfg.data.split, cfg.seed, cfg.data.train_limit)?,
     };
     if split.train.is_empty() || split.val.is_empty() || split.test.is_empty() {
         bail!(
