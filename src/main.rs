@@ -85,6 +85,10 @@ enum Command {
         /// Evaluate on the real data of this config instead of the checkpoint's own.
         #[arg(long, value_name = "CONFIG")]
         data: Option<String>,
+        /// Letterbox the images to this square size (a multiple of 32) instead of the
+        /// size the checkpoint was trained at.
+        #[arg(long)]
+        imgsz: Option<usize>,
         /// Print {"bbox": {"stats": [12]}, "segm": {"stats": [12]}}.
         #[arg(long)]
         json: bool,
@@ -112,6 +116,10 @@ enum Command {
         threads: Option<usize>,
         #[arg(long, conflicts_with = "onnx")]
         device: Option<DeviceKind>,
+        /// Letterbox the images to this square size (a multiple of 32) instead of the
+        /// size the checkpoint was trained at (`--checkpoint`; an ONNX graph has its own).
+        #[arg(long, conflicts_with = "onnx")]
+        imgsz: Option<usize>,
     },
     /// Export a checkpoint for other tools: ONNX (YOLO: ultralytics' layout; Mask R-CNN:
     /// three graphs) or safetensors (ultralytics' / torchvision's key names).
@@ -548,9 +556,10 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             checkpoint,
             split,
             data,
+            imgsz,
             json,
             device,
-        }) => train_cmd::eval_cmd(&checkpoint, split, data.as_deref(), device, json),
+        }) => train_cmd::eval_cmd(&checkpoint, split, data.as_deref(), device, imgsz, json),
         Some(Command::Predict {
             checkpoint,
             onnx,
@@ -559,9 +568,10 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             conf,
             threads,
             device,
+            imgsz,
         }) => match (checkpoint, onnx) {
             (_, Some(onnx)) => onnx_cmd::predict_onnx(&onnx, &input, &out, conf, threads),
-            (Some(c), None) => train_cmd::predict_cmd(&c, &input, &out, conf, device),
+            (Some(c), None) => train_cmd::predict_cmd(&c, &input, &out, conf, device, imgsz),
             (None, None) => anyhow::bail!("predict needs --checkpoint or --onnx"),
         },
         Some(Command::Export {

@@ -6,6 +6,7 @@
 
 use chicktrain::commands::train::{eval_cmd, SplitName};
 use chicktrain::config::{self, DeviceKind};
+use chicktrain::train::checkpoint::Checkpoint;
 use chicktrain::train::run_files::{read_test, StatsRecord};
 use chicktrain::train::trainer::{train, TrainOptions};
 
@@ -38,6 +39,7 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
             SplitName::Test,
             None,
             Some(DeviceKind::Ndarray),
+            None,
             true,
         )
         .unwrap(),
@@ -45,6 +47,39 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     .unwrap();
     let t = read_test(&r.run).unwrap();
     assert_eq!((on_ndarray.bbox, on_ndarray.segm), (t.bbox, t.segm));
+
+    // `--imgsz`: the trained size given explicitly is the default; another multiple of 32
+    // letterboxes to it (other pixels, so other detections, still a valid COCO score);
+    // a size the network cannot take is refused before any work, naming the flag.
+    let best = r.run.join("best.bpk");
+    let trained = Checkpoint::load(&best).unwrap().header.model.input_size();
+    let at = |s: Option<usize>| eval_cmd(&best, SplitName::Test, None, None, s, true);
+    let same: StatsRecord = serde_json::from_str(&at(Some(trained)).unwrap()).unwrap();
+    let t = read_test(&r.run).unwrap();
+    assert_eq!((same.bbox, same.segm), (t.bbox, t.segm));
+    let larger: StatsRecord = serde_json::from_str(&at(Some(trained + 32)).unwrap()).unwrap();
+    assert!(larger
+        .segm
+        .stats
+        .iter()
+        .all(|&v| v == -1.0 || (0.0..=1.0).contains(&v)));
+    let text = eval_cmd(
+        &best,
+        SplitName::Test,
+        None,
+        None,
+        Some(trained + 32),
+        false,
+    )
+    .unwrap();
+    assert!(text.contains(&format!("at {} px", trained + 32)), "{text}");
+    for bad in [trained + 1, 32, 4096] {
+        let e = format!("{:#}", at(Some(bad)).unwrap_err());
+        assert!(
+            e.contains(&format!("--imgsz {bad}")) && e.contains("multiple of 32"),
+            "{e}"
+        );
+    }
 
     // Resuming a finished run says so.
     let e = format!("{:#}", train(r.resumed, &r.resume).unwrap_err());

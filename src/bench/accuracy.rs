@@ -24,7 +24,7 @@ pub struct Accuracy {
 
 /// Test AP of a checkpoint on its own test split.
 pub fn checkpoint_accuracy(ck: &Path, device: Option<DeviceKind>) -> Result<Accuracy> {
-    let score = crate::train::evaluate::score_checkpoint(ck, SplitName::Test, None, device)?;
+    let score = crate::train::evaluate::score_checkpoint(ck, SplitName::Test, None, device, None)?;
     Ok(Accuracy {
         bbox: score.stats.bbox,
         segm: score.stats.segm,

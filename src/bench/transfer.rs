@@ -161,8 +161,14 @@ fn score_run(dir: &Path, data: &str, device: Option<DeviceKind>) -> Result<Trans
             }
         }
     }
-    let s = score_checkpoint(&dir.join("best.bpk"), SplitName::Test, Some(data), device)
-        .with_context(|| format!("scoring {} on {data}", dir.join("best.bpk").display()))?;
+    let s = score_checkpoint(
+        &dir.join("best.bpk"),
+        SplitName::Test,
+        Some(data),
+        device,
+        None,
+    )
+    .with_context(|| format!("scoring {} on {data}", dir.join("best.bpk").display()))?;
     let t = TransferEval {
         bbox: IouStats {
             stats: s.stats.bbox,

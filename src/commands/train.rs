@@ -16,7 +16,7 @@ use crate::render::export::instance_color;
 use crate::train::checkpoint::Checkpoint;
 use crate::train::device::device_of;
 pub use crate::train::evaluate::SplitName;
-use crate::train::evaluate::{push_planes, score_checkpoint, to_coco};
+use crate::train::evaluate::{inference_size, push_planes, score_checkpoint, to_coco};
 use crate::train::run_files::StatsRecord;
 use crate::train::trainer::{train, TrainOptions, TrainSummary};
 
@@ -56,26 +56,28 @@ pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -
     ))
 }
 
-/// `chicktrain eval --checkpoint X [--split val|test] [--data CONFIG] [--json]`: scores
-/// the checkpoint's weights (see [`score_checkpoint`]).
+/// `chicktrain eval --checkpoint X [--split val|test] [--data CONFIG] [--imgsz N] [--json]`:
+/// scores the checkpoint's weights (see [`score_checkpoint`]).
 pub fn eval_cmd(
     checkpoint: &Path,
     split: SplitName,
     data: Option<&str>,
     device: Option<DeviceKind>,
+    imgsz: Option<usize>,
     json_out: bool,
 ) -> Result<String> {
-    let s = score_checkpoint(checkpoint, split, data, device)?;
+    let s = score_checkpoint(checkpoint, split, data, device, imgsz)?;
     if json_out {
         return Ok(serde_json::to_string(&StatsRecord::from(&s.stats))?);
     }
     Ok(format!(
-        "{} (epoch {}) on the {:?} split of {}, {} images{}:\n{}\n{}\n{}",
+        "{} (epoch {}) on the {:?} split of {}, {} images at {} px{}:\n{}\n{}\n{}",
         checkpoint.display(),
         s.epoch,
         split,
         s.origin,
         s.images,
+        s.input,
         if s.proxy {
             " [proxy-real renders, not real photos]"
         } else {
@@ -160,13 +162,14 @@ pub fn predict_cmd(
     out_dir: &Path,
     conf: f32,
     device: Option<DeviceKind>,
+    imgsz: Option<usize>,
 ) -> Result<String> {
     let ck = Checkpoint::load(checkpoint)?;
+    let size = inference_size(ck.header.model.input_size(), imgsz)?;
     let dev = device_of(device.unwrap_or(ck.header.config.device))?;
     let model = ck
         .model("ema", &dev)
         .with_context(|| format!("in checkpoint {}", checkpoint.display()))?;
-    let size = ck.header.model.input_size();
     let classes = PredictClasses {
         category_ids: ck.header.category_ids.clone(),
         names: ck.header.class_names.clone(),

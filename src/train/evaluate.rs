@@ -291,6 +291,8 @@ pub enum SplitName {
 #[derive(Clone, Debug)]
 pub struct Score {
     pub stats: Stats,
+    /// The square size the images were letterboxed to.
+    pub input: usize,
     /// Epochs the checkpoint had completed.
     pub epoch: usize,
     pub images: usize,
@@ -301,17 +303,34 @@ pub struct Score {
     pub timing: EvalTiming,
 }
 
+/// The square size images are letterboxed to for inference: the checkpoint's training
+/// input size, or `imgsz` (ultralytics' `val imgsz=` / `predict imgsz=`) where given. The
+/// networks are convolutional, so any multiple of their largest stride (32) runs; objects
+/// then appear `imgsz / trained` times their training size in pixels, which is what a
+/// user scoring photos of another resolution or camera height asks for.
+pub fn inference_size(trained: usize, imgsz: Option<usize>) -> Result<usize> {
+    match imgsz {
+        None => Ok(trained),
+        Some(s) if (64..=2048).contains(&s) && s % 32 == 0 => Ok(s),
+        Some(s) => bail!(
+            "--imgsz {s}: give a multiple of 32 (the largest stride) from 64 to 2048 (the checkpoint was trained at {trained})"
+        ),
+    }
+}
+
 /// Scores `checkpoint`'s weights on `split` of the data it was trained with, rebuilt from
 /// its header; with `data`, on the real set of that config instead (e.g. your photos),
 /// split by its `data.split` and seed (`[0, 0]`: every image is test) and letterboxed
-/// to the checkpoint's input size.
+/// to the checkpoint's input size (or `imgsz`, see [`inference_size`]).
 pub fn score_checkpoint(
     checkpoint: &Path,
     split: SplitName,
     data: Option<&str>,
     device: Option<DeviceKind>,
+    imgsz: Option<usize>,
 ) -> Result<Score> {
     let ck = Checkpoint::load(checkpoint)?;
+    let input = inference_size(ck.header.model.input_size(), imgsz)?;
     let dev = device_of(device.unwrap_or(ck.header.config.device))?;
     let (real, split_ids, origin) = match data {
         None => {
@@ -349,11 +368,11 @@ pub fn score_checkpoint(
     let model = ck
         .model("ema", &dev)
         .with_context(|| format!("in checkpoint {}", checkpoint.display()))?;
-    let input = ck.header.model.input_size();
     let ev = evaluate_ids(&model, &real, ids, input, &dev, None)?;
     Ok(Score {
         stats: ev.stats,
         timing: ev.timing,
+        input,
         epoch: ck.header.epoch,
         images: ids.len(),
         proxy: real.proxy,
@@ -364,6 +383,20 @@ pub fn score_checkpoint(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn inference_size_takes_multiples_of_32_only() {
+        assert_eq!(inference_size(256, None).unwrap(), 256);
+        assert_eq!(inference_size(256, Some(640)).unwrap(), 640);
+        assert_eq!(inference_size(256, Some(64)).unwrap(), 64);
+        for bad in [0, 32, 100, 330, 2080] {
+            let e = inference_size(256, Some(bad)).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("--imgsz {bad}")) && e.contains("trained at 256"),
+                "{e}"
+            );
+        }
+    }
 
     /// Two images with a few GT boxes and 250 detections each (two categories, scores
     /// with many ties): the stats of the detections `coco_reads` keeps equal the stats of

@@ -766,6 +766,7 @@ mod tests {
             crate::train::evaluate::SplitName::Val,
             None,
             None,
+            None,
         )
         .unwrap();
         let logged = recs[2].val.as_ref().unwrap();

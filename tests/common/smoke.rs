@@ -32,7 +32,7 @@ pub fn smoke_opts(dir: &Path) -> TrainOptions {
 
 /// `eval --json` of `checkpoint` on `split` (`data`: `--data`).
 pub fn eval_stats(checkpoint: &Path, split: SplitName, data: Option<&str>) -> StatsRecord {
-    serde_json::from_str(&eval_cmd(checkpoint, split, data, None, true).unwrap()).unwrap()
+    serde_json::from_str(&eval_cmd(checkpoint, split, data, None, None, true).unwrap()).unwrap()
 }
 
 /// What [`smoke_scenario`] leaves for a test's own checks.
@@ -128,9 +128,28 @@ pub fn smoke_scenario(dir: &Path, config: &str, loss_names: &[&str]) -> SmokeRun
     image::RgbImage::from_pixel(80, 60, image::Rgb([200, 180, 150]))
         .save(img_dir.join("a.png"))
         .unwrap();
-    predict_cmd(&best, &img_dir, &dir.join("pred"), PREDICT_CONF, None).unwrap();
+    predict_cmd(&best, &img_dir, &dir.join("pred"), PREDICT_CONF, None, None).unwrap();
     assert!(dir.join("pred/a.png").is_file());
     chicktrain::annotations::coco::load_results(&dir.join("pred/results.json")).unwrap();
+    // At another inference size (`--imgsz`, the model is convolutional) the boxes still
+    // map back into the 80 × 60 image.
+    predict_cmd(
+        &best,
+        &img_dir,
+        &dir.join("pred128"),
+        PREDICT_CONF,
+        None,
+        Some(128),
+    )
+    .unwrap();
+    let dets =
+        chicktrain::annotations::coco::load_results(&dir.join("pred128/results.json")).unwrap();
+    for d in dets.iter().filter_map(|d| d.bbox) {
+        assert!(
+            d[0] >= 0.0 && d[1] >= 0.0 && d[0] + d[2] <= 80.01 && d[1] + d[3] <= 60.01,
+            "{d:?}"
+        );
+    }
 
     // --resume continues from last.bpk to a third epoch (without --smoke, which caps
     // epochs at 2, on the smoke-shrunk config).
