@@ -46,7 +46,7 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     )
     .unwrap();
     let t = read_test(&r.run).unwrap();
-    assert_eq!((on_ndarray.bbox, on_ndarray.segm), (t.bbox, t.segm));
+    assert_eq!((&on_ndarray.bbox, &on_ndarray.segm), (&t.bbox, &t.segm));
 
     // `--imgsz`: the trained size given explicitly is the default; another multiple of 32
     // letterboxes to it (other pixels, so other detections, still a valid COCO score);
@@ -55,7 +55,6 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     let trained = Checkpoint::load(&best).unwrap().header.model.input_size();
     let at = |s: Option<usize>| eval_cmd(&best, SplitName::Test, None, None, s, true);
     let same: StatsRecord = serde_json::from_str(&at(Some(trained)).unwrap()).unwrap();
-    let t = read_test(&r.run).unwrap();
     assert_eq!((same.bbox, same.segm), (t.bbox, t.segm));
     let larger: StatsRecord = serde_json::from_str(&at(Some(trained + 32)).unwrap()).unwrap();
     assert!(larger
