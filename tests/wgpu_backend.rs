@@ -109,8 +109,10 @@ fn wgpu_and_flex_train_alike_and_read_each_others_checkpoints() {
             "{}: outputs differ by {rel:?} (bound {OUTPUT_TOL})",
             run.display()
         );
-        let sg = score_checkpoint(&best, SplitName::Test, None, Some(DeviceKind::Wgpu)).unwrap();
-        let sf = score_checkpoint(&best, SplitName::Test, None, Some(DeviceKind::Flex)).unwrap();
+        let sg =
+            score_checkpoint(&best, SplitName::Test, None, Some(DeviceKind::Wgpu), None).unwrap();
+        let sf =
+            score_checkpoint(&best, SplitName::Test, None, Some(DeviceKind::Flex), None).unwrap();
         for (x, y) in sg
             .stats
             .bbox
