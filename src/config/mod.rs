@@ -4,6 +4,9 @@
 //! `epoch = 5` fails with the key's name, the file and the line instead of silently
 //! training with the default. `--set a.b=v` overrides edit the TOML tree before it is
 //! typed, so they go through exactly the same checks.
+//!
+//! `base = "other.toml"` (detectron2's `_BASE_`) starts a config from another one, so a
+//! variant states only what differs; see [`BASE_KEY`].
 
 use std::path::Path;
 
@@ -131,9 +134,62 @@ pub fn load(name: &str, overrides: &[String]) -> Result<Config> {
     parse(&text, &origin, overrides)
 }
 
+/// The top-level key that names the config this one extends: a path relative to this
+/// file (else to the working directory), or a shipped config's name. The base is read
+/// first (recursively) and this file's keys are laid over it table by table, as
+/// detectron2's `_BASE_` does; a table that names a `kind` other than the base's (a
+/// `[model]` of another family, a `[data.real]` of another format) replaces the base's
+/// table instead, because the keys of one kind mean nothing to another.
+pub const BASE_KEY: &str = "base";
+
+/// Chains of `base` longer than this are refused (they are almost surely a cycle).
+const MAX_BASE_DEPTH: usize = 8;
+
+/// Resolves `tree`'s [`BASE_KEY`] chain; `true` when there was one.
+fn with_base(mut tree: toml::Table, origin: &str, depth: usize) -> Result<(toml::Table, bool)> {
+    let Some(base) = tree.remove(BASE_KEY) else {
+        return Ok((tree, false));
+    };
+    let Some(name) = base.as_str() else {
+        bail!("config {origin}: `{BASE_KEY}` must be a string (a config file or a shipped config's name), got {base}");
+    };
+    if depth >= MAX_BASE_DEPTH {
+        bail!("config {origin}: more than {MAX_BASE_DEPTH} levels of `{BASE_KEY}` (does a config extend itself?)");
+    }
+    let beside = Path::new(origin).parent().map(|dir| dir.join(name));
+    let (text, base_origin) = match beside {
+        Some(p) if p.is_file() => locate(&p.to_string_lossy()),
+        _ => locate(name),
+    }
+    .with_context(|| format!("{BASE_KEY} = {name:?} of config {origin}"))?;
+    let base_tree: toml::Table = toml::from_str(&text).with_context(|| {
+        format!("config {base_origin} (the {BASE_KEY} of {origin}) is not valid TOML")
+    })?;
+    let (mut merged, _) = with_base(base_tree, &base_origin, depth + 1)?;
+    overlay(&mut merged, tree);
+    Ok((merged, true))
+}
+
+/// Lays `over` onto `base` (see [`BASE_KEY`]).
+fn overlay(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o))
+                if o.get("kind").is_none() || o.get("kind") == b.get("kind") =>
+            {
+                overlay(b, o)
+            }
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
+
 pub fn parse(text: &str, origin: &str, overrides: &[String]) -> Result<Config> {
-    let mut tree: toml::Table =
+    let tree: toml::Table =
         toml::from_str(text).with_context(|| format!("config {origin} is not valid TOML"))?;
+    let (mut tree, has_base) = with_base(tree, origin, 0)?;
     // Typed from text (not from the tree) so errors quote the offending `key = value`
     // line; with overrides, from the re-serialised tree, which quotes the override.
     for o in overrides {
@@ -147,14 +203,16 @@ pub fn parse(text: &str, origin: &str, overrides: &[String]) -> Result<Config> {
         }
         _ => false,
     };
-    let typed_text = if overrides.is_empty() && !default_kind {
+    let typed_text = if overrides.is_empty() && !default_kind && !has_base {
         text.to_string()
     } else {
         toml::to_string(&tree)?
     };
     let cfg: Config = toml::from_str(&typed_text).with_context(|| {
-        if overrides.is_empty() {
+        if overrides.is_empty() && !has_base {
             format!("in config {origin}")
+        } else if overrides.is_empty() {
+            format!("in config {origin} laid over its {BASE_KEY}")
         } else {
             format!("in config {origin} with overrides {}", overrides.join(" "))
         }
@@ -450,6 +508,105 @@ mod tests {
                 "{bad}: {e}"
             );
         }
+    }
+
+    /// Writes `files` into a fresh folder and returns it.
+    fn config_dir(tag: &str, files: &[(&str, &str)]) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("ct-base-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        for (name, text) in files {
+            std::fs::write(dir.join(name), text).unwrap();
+        }
+        dir
+    }
+
+    #[test]
+    fn base_is_laid_under_the_config_table_by_table() {
+        let dir = config_dir(
+            "merge",
+            &[
+                (
+                    "child.toml",
+                    "base = \"quickstart\"\nname = \"child\"\n[train]\nepochs = 3\n",
+                ),
+                (
+                    "grandchild.toml",
+                    "base = \"child.toml\"\n[data]\nsynthetic = 7\n",
+                ),
+            ],
+        );
+        let quick = parse(
+            SHIPPED
+                .iter()
+                .find(|(n, _)| *n == "quickstart.toml")
+                .unwrap()
+                .1,
+            "q",
+            &[],
+        )
+        .unwrap();
+        let cfg = load(
+            dir.join("grandchild.toml").to_str().unwrap(),
+            &["train.batch=4".into()],
+        )
+        .unwrap();
+        assert_eq!(cfg.name, "child");
+        assert_eq!(
+            (cfg.train.epochs, cfg.train.batch, cfg.data.synthetic),
+            (3, 4, 7)
+        );
+        // Everything not restated comes from the shipped quickstart, two levels down.
+        assert_eq!(cfg.train.lr, quick.train.lr);
+        assert_eq!(cfg.train.copy_paste, quick.train.copy_paste);
+        assert_eq!(cfg.data.image_size, quick.data.image_size);
+        assert_eq!(cfg.model, quick.model);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_table_of_another_kind_replaces_the_base_table() {
+        let dir = config_dir(
+            "kind",
+            &[(
+                "mr.toml",
+                "base = \"quickstart\"\n[model]\nkind = \"maskrcnn\"\ndepth = 18\npreset = \"compact\"\n",
+            )],
+        );
+        // The quickstart's YOLO keys (scale, levels, c2psa) would be refused by a Mask
+        // R-CNN model table: they must not be merged into it.
+        let cfg = load(dir.join("mr.toml").to_str().unwrap(), &[]).unwrap();
+        assert!(
+            matches!(cfg.model, ModelConfig::Maskrcnn(_)),
+            "{:?}",
+            cfg.model
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn bad_bases_are_clear_errors() {
+        let dir = config_dir(
+            "bad",
+            &[
+                ("loop_a.toml", "base = \"loop_b.toml\"\n"),
+                ("loop_b.toml", "base = \"loop_a.toml\"\n"),
+                ("missing.toml", "base = \"no_such_config.toml\"\n"),
+                ("number.toml", "base = 3\n"),
+                ("broken.toml", "base = \"not_toml.toml\"\n"),
+                ("not_toml.toml", "[train\n"),
+            ],
+        );
+        for (file, want) in [
+            ("loop_a.toml", "levels of `base`"),
+            ("missing.toml", "no_such_config.toml"),
+            ("number.toml", "must be a string"),
+            ("broken.toml", "is not valid TOML"),
+        ] {
+            let e = load(dir.join(file).to_str().unwrap(), &[]).unwrap_err();
+            assert!(format!("{e:#}").contains(want), "{file}: {e:#}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
