@@ -55,28 +55,42 @@ def load_results(gt, folder):
     return results
 
 
-def box_extent(gt, results, min_score=0.5, min_iou=0.5):
-    ratios, offsets = [], []
+MIN_SCORE = 0.5
+MIN_IOU = 0.5
+
+
+def matches(gt, results):
+    """(detection index, ground-truth annotation) for every detection scoring > MIN_SCORE
+    whose mask overlaps its best ground-truth mask at IoU >= MIN_IOU."""
     by_image = {}
-    for r in results:
-        if r["score"] > min_score:
-            by_image.setdefault(r["image_id"], []).append(r)
+    for k, r in enumerate(results):
+        if r["score"] > MIN_SCORE:
+            by_image.setdefault(r["image_id"], []).append(k)
+    out = []
     for image_id, dets in by_image.items():
         anns = gt.loadAnns(gt.getAnnIds(imgIds=image_id))
         if not anns:
             continue
         rles = [gt.annToRLE(a) for a in anns]
-        iou = mask_util.iou([d["segmentation"] for d in dets], rles, [0] * len(rles))
-        for i, d in enumerate(dets):
+        iou = mask_util.iou([results[k]["segmentation"] for k in dets], rles, [0] * len(rles))
+        for i, k in enumerate(dets):
             j = int(np.argmax(iou[i]))
-            if iou[i, j] < min_iou:
-                continue
-            g, p = anns[j]["bbox"], d["bbox"]
-            ratios.append((p[2] / g[2], p[3] / g[3]))
-            offsets.append((
-                abs(p[0] + p[2] / 2 - g[0] - g[2] / 2) / g[2],
-                abs(p[1] + p[3] / 2 - g[1] - g[3] / 2) / g[3],
-            ))
+            if iou[i, j] >= MIN_IOU:
+                out.append((k, anns[j]))
+    return out
+
+
+def box_extent(pairs, boxes):
+    """Width / height ratios and centre offsets (fractions of the GT's size) of `boxes`
+    (xywh, indexed like the results) against the matched ground truths' boxes."""
+    ratios, offsets = [], []
+    for k, ann in pairs:
+        g, p = ann["bbox"], boxes[k]
+        ratios.append((p[2] / g[2], p[3] / g[3]))
+        offsets.append((
+            abs(p[0] + p[2] / 2 - g[0] - g[2] / 2) / g[2],
+            abs(p[1] + p[3] / 2 - g[1] - g[3] / 2) / g[3],
+        ))
     return np.array(ratios), np.array(offsets)
 
 
@@ -99,15 +113,17 @@ def main(folders):
         s = coco_stats(gt, results, "segm")
         from_mask = [dict(r, bbox=mask_util.toBbox(r["segmentation"]).tolist()) for r in results]
         m = coco_stats(gt, from_mask, "bbox")
-        ratios, offsets = box_extent(gt, results)
-        mask_ratios, _ = box_extent(gt, from_mask)
+        # One matching (by mask) for both box sets: the masks are the same either way.
+        pairs = matches(gt, results)
+        ratios, offsets = box_extent(pairs, [r["bbox"] for r in results])
+        mask_ratios, _ = box_extent(pairs, [f["bbox"] for f in from_mask])
         q = np.percentile(ratios, [25, 50, 75], axis=0)
         off = np.median(offsets, axis=0)
         mq = np.median(mask_ratios, axis=0)
         m90 = np.percentile(mask_ratios[:, 0], 90)
         fill = np.median([
             mask_util.iou([r["bbox"]], [f["bbox"]], [0])[0][0]
-            for r, f in zip(results, from_mask) if r["score"] > 0.5
+            for r, f in zip(results, from_mask) if r["score"] > MIN_SCORE
         ])
         print(f"| {folder} | {b[0]:.3f} / {b[2]:.3f} | {s[0]:.3f} / {s[2]:.3f} "
               f"| {m[0]:.3f} / {m[2]:.3f} | {len(ratios)} "
