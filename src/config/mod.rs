@@ -191,7 +191,8 @@ pub fn parse(text: &str, origin: &str, overrides: &[String]) -> Result<Config> {
         toml::from_str(text).with_context(|| format!("config {origin} is not valid TOML"))?;
     let (mut tree, has_base) = with_base(tree, origin, 0)?;
     // Typed from text (not from the tree) so errors quote the offending `key = value`
-    // line; with overrides, from the re-serialised tree, which quotes the override.
+    // line; with overrides or a base, from the re-serialised (merged) tree, which quotes
+    // the override or the merged line.
     for o in overrides {
         apply_override(&mut tree, o).with_context(|| format!("bad override --set {o}"))?;
     }
