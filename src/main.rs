@@ -92,6 +92,10 @@ enum Command {
         /// Print {"bbox": {"stats": [12]}, "segm": {"stats": [12]}}.
         #[arg(long)]
         json: bool,
+        /// Test-time augmentation: score each image in its eight top-view symmetries
+        /// (quarter turns, mirrored) and fuse the detections (8× the inference time).
+        #[arg(long)]
+        augment: bool,
         #[arg(long)]
         device: Option<DeviceKind>,
     },
@@ -120,6 +124,11 @@ enum Command {
         /// size the checkpoint was trained at (`--checkpoint`; an ONNX graph has its own).
         #[arg(long, conflicts_with = "onnx")]
         imgsz: Option<usize>,
+        /// Test-time augmentation: predict on each image's eight top-view symmetries
+        /// (quarter turns, mirrored) and fuse the detections (8× the inference time; a
+        /// fused score is the views' mean, so `--conf` applies to that mean too).
+        #[arg(long)]
+        augment: bool,
     },
     /// Export a checkpoint for other tools: ONNX (YOLO: ultralytics' layout; Mask R-CNN:
     /// three graphs) or safetensors (ultralytics' / torchvision's key names).
@@ -558,8 +567,17 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             data,
             imgsz,
             json,
+            augment,
             device,
-        }) => train_cmd::eval_cmd(&checkpoint, split, data.as_deref(), device, imgsz, json),
+        }) => train_cmd::eval_cmd(
+            &checkpoint,
+            split,
+            data.as_deref(),
+            device,
+            imgsz,
+            json,
+            augment,
+        ),
         Some(Command::Predict {
             checkpoint,
             onnx,
@@ -569,9 +587,12 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             threads,
             device,
             imgsz,
+            augment,
         }) => match (checkpoint, onnx) {
-            (_, Some(onnx)) => onnx_cmd::predict_onnx(&onnx, &input, &out, conf, threads),
-            (Some(c), None) => train_cmd::predict_cmd(&c, &input, &out, conf, device, imgsz),
+            (_, Some(onnx)) => onnx_cmd::predict_onnx(&onnx, &input, &out, conf, threads, augment),
+            (Some(c), None) => {
+                train_cmd::predict_cmd(&c, &input, &out, conf, device, imgsz, augment)
+            }
             (None, None) => anyhow::bail!("predict needs --checkpoint or --onnx"),
         },
         Some(Command::Export {

@@ -41,6 +41,7 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
             Some(DeviceKind::Ndarray),
             None,
             true,
+            false,
         )
         .unwrap(),
     )
@@ -53,7 +54,7 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     // a size the network cannot take is refused before any work, naming the flag.
     let best = r.run.join("best.bpk");
     let trained = Checkpoint::load(&best).unwrap().header.model.input_size();
-    let at = |s: Option<usize>| eval_cmd(&best, SplitName::Test, None, None, s, true);
+    let at = |s: Option<usize>| eval_cmd(&best, SplitName::Test, None, None, s, true, false);
     let same: StatsRecord = serde_json::from_str(&at(Some(trained)).unwrap()).unwrap();
     assert_eq!((same.bbox, same.segm), (t.bbox, t.segm));
     let larger: StatsRecord = serde_json::from_str(&at(Some(trained + 32)).unwrap()).unwrap();
@@ -69,9 +70,24 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
         None,
         Some(trained + 32),
         false,
+        false,
     )
     .unwrap();
     assert!(text.contains(&format!("at {} px", trained + 32)), "{text}");
+    // `--augment` (test-time augmentation) scores the same images in eight views: a valid
+    // COCO score, and the report says how it was made.
+    let tta = eval_cmd(&best, SplitName::Test, None, None, None, false, true).unwrap();
+    assert!(tta.contains("test-time augmentation (8 views)"), "{tta}");
+    let tta: StatsRecord = serde_json::from_str(
+        &eval_cmd(&best, SplitName::Test, None, None, None, true, true).unwrap(),
+    )
+    .unwrap();
+    assert!(tta
+        .segm
+        .stats
+        .iter()
+        .chain(&tta.bbox.stats)
+        .all(|&v| v == -1.0 || (0.0..=1.0).contains(&v)));
     for bad in [trained + 1, 32, 4096] {
         let e = format!("{:#}", at(Some(bad)).unwrap_err());
         assert!(

@@ -24,7 +24,8 @@ pub struct Accuracy {
 
 /// Test AP of a checkpoint on its own test split.
 pub fn checkpoint_accuracy(ck: &Path, device: Option<DeviceKind>) -> Result<Accuracy> {
-    let score = crate::train::evaluate::score_checkpoint(ck, SplitName::Test, None, device, None)?;
+    let score =
+        crate::train::evaluate::score_checkpoint(ck, SplitName::Test, None, device, None, false)?;
     Ok(Accuracy {
         bbox: score.stats.bbox,
         segm: score.stats.segm,

@@ -167,6 +167,7 @@ fn score_run(dir: &Path, data: &str, device: Option<DeviceKind>) -> Result<Trans
         Some(data),
         device,
         None,
+        false,
     )
     .with_context(|| format!("scoring {} on {data}", dir.join("best.bpk").display()))?;
     let t = TransferEval {

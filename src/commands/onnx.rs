@@ -386,11 +386,12 @@ pub fn predict_onnx(
     out_dir: &Path,
     conf: f32,
     threads: Option<usize>,
+    augment: bool,
 ) -> Result<String> {
     set_threads(threads.unwrap_or_else(all_cores));
     let eng = TractEngine::load(onnx, Some(1))?;
     if eng.metadata("chicktrain_model") == Some("maskrcnn") {
-        return predict_maskrcnn_onnx(eng, input, out_dir, conf);
+        return predict_maskrcnn_onnx(eng, input, out_dir, conf, augment);
     }
     let info = model_info(&eng)?;
     let size = info.size;
@@ -401,6 +402,7 @@ pub fn predict_onnx(
         size as u32,
         &info.classes,
         conf,
+        augment,
         &mut |px| {
             let out = eng.run(&[1, 3, size, size], &px)?;
             let (o0, o1) = (&out[0], &out[1]);
@@ -435,6 +437,7 @@ fn predict_maskrcnn_onnx(
     input: &Path,
     out_dir: &Path,
     conf: f32,
+    augment: bool,
 ) -> Result<String> {
     let p = eng.path.clone();
     let pd = p.display();
@@ -478,12 +481,20 @@ fn predict_maskrcnn_onnx(
         category_ids: ids,
         names,
     };
-    let text = predict_images(input, out_dir, size as u32, &classes, conf, &mut |px| {
-        let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &net.device);
-        let mut d = infer(&net, &cfg, x)?.swap_remove(0);
-        d.retain(|x| x.score >= conf);
-        Ok(d)
-    })?;
+    let text = predict_images(
+        input,
+        out_dir,
+        size as u32,
+        &classes,
+        conf,
+        augment,
+        &mut |px| {
+            let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &net.device);
+            let mut d = infer(&net, &cfg, x)?.swap_remove(0);
+            d.retain(|x| x.score >= conf);
+            Ok(d)
+        },
+    )?;
     Ok(format!(
         "{text} (tract, {} + its two RoI head graphs)",
         p.display()

@@ -16,7 +16,9 @@ use crate::render::export::instance_color;
 use crate::train::checkpoint::Checkpoint;
 use crate::train::device::device_of;
 pub use crate::train::evaluate::SplitName;
-use crate::train::evaluate::{inference_size, push_planes, score_checkpoint, to_coco};
+use crate::train::evaluate::{
+    augmented, fused_to_coco, inference_size, push_planes, score_checkpoint, to_coco,
+};
 use crate::train::run_files::StatsRecord;
 use crate::train::trainer::{train, TrainOptions, TrainSummary};
 
@@ -56,7 +58,8 @@ pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -
     ))
 }
 
-/// `chicktrain eval --checkpoint X [--split val|test] [--data CONFIG] [--imgsz N] [--json]`:
+/// `chicktrain eval --checkpoint X [--split val|test] [--data CONFIG] [--imgsz N] [--json]
+/// [--augment]`:
 /// scores the checkpoint's weights (see [`score_checkpoint`]).
 pub fn eval_cmd(
     checkpoint: &Path,
@@ -65,19 +68,25 @@ pub fn eval_cmd(
     device: Option<DeviceKind>,
     imgsz: Option<usize>,
     json_out: bool,
+    augment: bool,
 ) -> Result<String> {
-    let s = score_checkpoint(checkpoint, split, data, device, imgsz)?;
+    let s = score_checkpoint(checkpoint, split, data, device, imgsz, augment)?;
     if json_out {
         return Ok(serde_json::to_string(&StatsRecord::from(&s.stats))?);
     }
     Ok(format!(
-        "{} (epoch {}) on the {:?} split of {}, {} images at {} px{}:\n{}\n{}\n{}",
+        "{} (epoch {}) on the {:?} split of {}, {} images at {} px{}{}:\n{}\n{}\n{}",
         checkpoint.display(),
         s.epoch,
         split,
         s.origin,
         s.images,
         s.input,
+        if augment {
+            ", test-time augmentation (8 views)"
+        } else {
+            ""
+        },
         if s.proxy {
             " [proxy-real renders, not real photos]"
         } else {
@@ -163,6 +172,7 @@ pub fn predict_cmd(
     conf: f32,
     device: Option<DeviceKind>,
     imgsz: Option<usize>,
+    augment: bool,
 ) -> Result<String> {
     let ck = Checkpoint::load(checkpoint)?;
     let size = inference_size(ck.header.model.input_size(), imgsz)?;
@@ -174,10 +184,18 @@ pub fn predict_cmd(
         category_ids: ck.header.category_ids.clone(),
         names: ck.header.class_names.clone(),
     };
-    predict_images(input, out_dir, size as u32, &classes, conf, &mut |px| {
-        let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &dev);
-        Ok(model.predict(x, conf).swap_remove(0))
-    })
+    predict_images(
+        input,
+        out_dir,
+        size as u32,
+        &classes,
+        conf,
+        augment,
+        &mut |px| {
+            let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &dev);
+            Ok(model.predict(x, conf).swap_remove(0))
+        },
+    )
 }
 
 /// Category ids and names of a model's classes (index = class).
@@ -189,13 +207,15 @@ pub struct PredictClasses {
 /// The body of `predict` for any engine: letterboxes each image of `input` to
 /// `size × size`, hands its `[1, 3, size, size]` planes to `infer` (detections with score
 /// > `conf` at the input size), maps them back to the image and writes the overlays,
-/// `results.json` and `images.json` into `out_dir`.
+/// `results.json` and `images.json` into `out_dir`. With `augment`, every image is seen
+/// in eight views ([`augmented`]) and the fused detections scoring above `conf` are kept.
 pub fn predict_images(
     input: &Path,
     out_dir: &Path,
     size: u32,
     classes: &PredictClasses,
     conf: f32,
+    augment: bool,
     infer: &mut dyn FnMut(Vec<f32>) -> Result<Vec<crate::model::detection::Detection>>,
 ) -> Result<String> {
     let files = list_images(input)?;
@@ -206,15 +226,23 @@ pub fn predict_images(
     for (k, f) in files.iter().enumerate() {
         let img = read_image(f)?;
         let (w, h) = img.dimensions();
-        let small = Letterbox::new((w, h), size).image(&img);
-        let mut px = Vec::new();
-        push_planes(&small, &mut px);
-        let raw = infer(px).with_context(|| format!("on {}", f.display()))?;
         let id = k as u64 + 1;
-        let dets: Vec<Detection> = raw
-            .iter()
-            .map(|d| to_coco(d, id, &classes.category_ids, size, (w, h)))
-            .collect();
+        let dets: Vec<Detection> = if augment {
+            augmented(&img, size, infer)
+                .with_context(|| format!("on {}", f.display()))?
+                .iter()
+                .filter(|d| d.score > conf)
+                .map(|d| fused_to_coco(d, id, &classes.category_ids))
+                .collect()
+        } else {
+            let small = Letterbox::new((w, h), size).image(&img);
+            let mut px = Vec::new();
+            push_planes(&small, &mut px);
+            let raw = infer(px).with_context(|| format!("on {}", f.display()))?;
+            raw.iter()
+                .map(|d| to_coco(d, id, &classes.category_ids, size, (w, h)))
+                .collect()
+        };
         let ov = overlay(&img, &dets)?;
         let stem = f
             .file_stem()

@@ -222,6 +222,13 @@ impl RealSet {
 
     /// The image only, at the network input size, plus its original `(width, height)`.
     pub fn image(&self, id: u64, input: u32) -> Result<(RgbImage, (u32, u32))> {
+        let img = self.original(id)?;
+        let orig = img.dimensions();
+        Ok((Letterbox::new(orig, input).image(&img), orig))
+    }
+
+    /// The image at its original size (checked against its annotation's).
+    pub fn original(&self, id: u64) -> Result<RgbImage> {
         let im = self
             .gt
             .image(id)
@@ -246,8 +253,7 @@ impl RealSet {
                 img
             }
         };
-        let orig = (im.width, im.height);
-        Ok((Letterbox::new(orig, input).image(&img), orig))
+        Ok(img)
     }
 
     /// Image and non-crowd instances at the network input size.

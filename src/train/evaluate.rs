@@ -16,6 +16,7 @@ use crate::annotations::coco::{CocoDataset, Detection, Segmentation};
 use crate::annotations::rle::Rle;
 use crate::data::dataset::RealSet;
 use crate::data::letterbox::Letterbox;
+use crate::eval::tta::{fuse, Fused, View, ViewDetection};
 use crate::eval::{evaluate, IouType};
 use crate::model::detection::Detection as RawDetection;
 
@@ -67,6 +68,58 @@ pub fn to_coco(
         score: d.score as f64,
         bbox: Some(lb.unbox(b)),
         segmentation: Some(Segmentation::from_rle(&Rle::encode_cropped(&mask))),
+    }
+}
+
+/// Mask IoU above which detections of two views are one instance (test-time
+/// augmentation; NMS's usual 0.5).
+pub const TTA_IOU: f64 = 0.5;
+
+/// Test-time augmentation of one image (see [`crate::eval::tta`]): `orig` in each of
+/// the eight symmetries of the square, letterboxed to `size × size` and handed to `infer`
+/// (`[1, 3, size, size]` planes → detections at the input); the detections COCO can read
+/// ([`coco_reads`]) of each view are decoded at the view's original size, mapped back to
+/// `orig` (a pixel permutation) and fused, at most [`COCO_MAX_DETS`] per class.
+pub fn augmented(
+    orig: &image::RgbImage,
+    size: u32,
+    infer: &mut dyn FnMut(Vec<f32>) -> Result<Vec<RawDetection>>,
+) -> Result<Vec<Fused>> {
+    let mut all = Vec::new();
+    for (k, view) in View::ALL.iter().enumerate() {
+        let img = view.image(orig);
+        let dims = img.dimensions();
+        let lb = Letterbox::new(dims, size);
+        let mut px = Vec::with_capacity(3 * (size * size) as usize);
+        push_planes(&lb.image(&img), &mut px);
+        let raw = infer(px)?;
+        let keys: Vec<(f32, usize)> = raw.iter().map(|d| (d.score, d.class)).collect();
+        let read = coco_reads(&keys, COCO_MAX_DETS);
+        let kept: Vec<&RawDetection> = raw.iter().zip(read).filter(|x| x.1).map(|x| x.0).collect();
+        all.par_extend(kept.par_iter().map(|d| {
+            let bx = lb.unbox_xyxy(d.xyxy().map(|v| v as f64));
+            let mask = d.mask_in(lb.orig, bx.map(|v| v as f32));
+            ViewDetection {
+                view: k,
+                class: d.class,
+                score: d.score,
+                xyxy: view.unmap_box(bx, dims),
+                mask: view.unmap_mask(&mask),
+            }
+        }));
+    }
+    Ok(fuse(&all, View::ALL.len(), TTA_IOU, COCO_MAX_DETS))
+}
+
+/// A fused detection of image `image_id` as a COCO result.
+pub fn fused_to_coco(f: &Fused, image_id: u64, cat_ids: &[u64]) -> Detection {
+    let [x0, y0, x1, y1] = f.xyxy;
+    Detection {
+        image_id,
+        category_id: cat_ids.get(f.class).copied().unwrap_or(f.class as u64 + 1),
+        score: f.score as f64,
+        bbox: Some([x0, y0, x1 - x0, y1 - y0]),
+        segmentation: Some(Segmentation::from_rle(&Rle::encode_cropped(&f.mask))),
     }
 }
 
@@ -187,7 +240,8 @@ impl InputCache {
 
 /// Runs `model` on the real images `ids`, letterboxed to its `input` size (from `cache`
 /// where it holds them); returns the detections COCO evaluation reads ([`coco_reads`])
-/// and where the time went.
+/// and where the time went. With `augment`, each image is seen in eight views and the
+/// detections fused ([`augmented`]; the cache is not used).
 pub fn predict_ids(
     model: &Detector,
     set: &RealSet,
@@ -195,6 +249,7 @@ pub fn predict_ids(
     input: usize,
     device: &Device,
     cache: Option<&InputCache>,
+    augment: bool,
 ) -> Result<(Vec<Detection>, EvalTiming)> {
     let size = input;
     let mut dets = Vec::new();
@@ -202,6 +257,25 @@ pub fn predict_ids(
         images: ids.len(),
         ..Default::default()
     };
+    if augment {
+        for &id in ids {
+            let t0 = Instant::now();
+            let orig = set.original(id)?;
+            let t1 = Instant::now();
+            let mut forward = 0.0;
+            let fused = augmented(&orig, size as u32, &mut |px| {
+                let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), device);
+                let (mut raw, f) = model.predict_timed(x, VAL_CONF);
+                forward += f;
+                Ok(raw.swap_remove(0))
+            })?;
+            dets.extend(fused.iter().map(|f| fused_to_coco(f, id, &set.cat_ids)));
+            t.load += (t1 - t0).as_secs_f64();
+            t.forward += forward;
+            t.masks += t1.elapsed().as_secs_f64() - forward;
+        }
+        return Ok((dets, t));
+    }
     for chunk in ids.chunks(EVAL_BATCH) {
         let t0 = Instant::now();
         let mut px = Vec::with_capacity(chunk.len() * 3 * size * size);
@@ -254,7 +328,7 @@ pub struct Evaluation {
 }
 
 /// bbox and segm COCO stats of `model` (input size `input`) on the real images `ids`
-/// (inputs from `cache` where it holds them).
+/// (inputs from `cache` where it holds them; with `augment`, test-time augmentation).
 pub fn evaluate_ids(
     model: &Detector,
     set: &RealSet,
@@ -262,8 +336,9 @@ pub fn evaluate_ids(
     input: usize,
     device: &Device,
     cache: Option<&InputCache>,
+    augment: bool,
 ) -> Result<Evaluation> {
-    let (detections, mut timing) = predict_ids(model, set, ids, input, device, cache)?;
+    let (detections, mut timing) = predict_ids(model, set, ids, input, device, cache, augment)?;
     let t0 = Instant::now();
     let gt = gt_subset(&set.gt, ids);
     let bbox = evaluate(&gt, &detections, IouType::Bbox).context("bbox evaluation")?;
@@ -321,13 +396,15 @@ pub fn inference_size(trained: usize, imgsz: Option<usize>) -> Result<usize> {
 /// Scores `checkpoint`'s weights on `split` of the data it was trained with, rebuilt from
 /// its header; with `data`, on the real set of that config instead (e.g. your photos),
 /// split by its `data.split` and seed (`[0, 0]`: every image is test) and letterboxed
-/// to the checkpoint's input size (or `imgsz`, see [`inference_size`]).
+/// to the checkpoint's input size (or `imgsz`, see [`inference_size`]); with `augment`,
+/// by test-time augmentation ([`augmented`]).
 pub fn score_checkpoint(
     checkpoint: &Path,
     split: SplitName,
     data: Option<&str>,
     device: Option<DeviceKind>,
     imgsz: Option<usize>,
+    augment: bool,
 ) -> Result<Score> {
     let ck = Checkpoint::load(checkpoint)?;
     let input = inference_size(ck.header.model.input_size(), imgsz)?;
@@ -368,7 +445,7 @@ pub fn score_checkpoint(
     let model = ck
         .model("ema", &dev)
         .with_context(|| format!("in checkpoint {}", checkpoint.display()))?;
-    let ev = evaluate_ids(&model, &real, ids, input, &dev, None)?;
+    let ev = evaluate_ids(&model, &real, ids, input, &dev, None, augment)?;
     Ok(Score {
         stats: ev.stats,
         timing: ev.timing,
@@ -383,6 +460,70 @@ pub fn score_checkpoint(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::detection::MaskSource;
+
+    /// A "detector" that finds the one bright rectangle of its input exactly: its tight
+    /// box, a full-box mask, score 0.9.
+    fn bright_box(px: Vec<f32>, size: usize) -> Vec<RawDetection> {
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        for y in 0..size {
+            for x in 0..size {
+                if px[y * size + x] > 0.9 {
+                    (x0, y0) = (x0.min(x), y0.min(y));
+                    (x1, y1) = (x1.max(x + 1), y1.max(y + 1));
+                }
+            }
+        }
+        vec![RawDetection {
+            bbox: [x0 as f32, y0 as f32, (x1 - x0) as f32, (y1 - y0) as f32],
+            score: 0.9,
+            class: 0,
+            mask: MaskSource::RoiProbs {
+                probs: vec![1.0; 28 * 28],
+                size: 28,
+                threshold: 0.5,
+            },
+        }]
+    }
+
+    #[test]
+    fn augmented_views_map_back_onto_the_image() {
+        // An off-centre rectangle in a 32 × 16 image, letterboxed to 32 without
+        // resampling (the turned views are 16 × 32, padded left and right): every view
+        // finds it, and all eight map back onto the same pixels, fused into one.
+        let (w, h) = (32u32, 16u32);
+        let rect = |x: u32, y: u32| (4..12).contains(&x) && (2..6).contains(&y);
+        let img = image::RgbImage::from_fn(w, h, |x, y| {
+            image::Rgb(if rect(x, y) { [255; 3] } else { [0; 3] })
+        });
+        let mut calls = 0;
+        let fused = augmented(&img, 32, &mut |px| {
+            calls += 1;
+            Ok(bright_box(px, 32))
+        })
+        .unwrap();
+        assert_eq!(calls, 8);
+        assert_eq!(fused.len(), 1, "{fused:?}");
+        let f = &fused[0];
+        assert_eq!(f.members, 8);
+        assert!((f.score - 0.9).abs() < 1e-6);
+        for (got, want) in f.xyxy.iter().zip([4.0, 2.0, 12.0, 6.0]) {
+            assert!((got - want).abs() < 1e-9, "{:?}", f.xyxy);
+        }
+        let full = f.mask.full();
+        assert_eq!((full.width, full.height), (w, h));
+        for y in 0..h {
+            for x in 0..w {
+                assert_eq!(full.get(x, y), rect(x, y), "pixel ({x}, {y})");
+            }
+        }
+        let coco = fused_to_coco(f, 7, &[3]);
+        assert_eq!((coco.image_id, coco.category_id), (7, 3));
+        assert_eq!(
+            coco.bbox.map(|b| b.map(|v| v.round())),
+            Some([4.0, 2.0, 8.0, 4.0])
+        );
+    }
 
     #[test]
     fn inference_size_takes_multiples_of_32_only() {

@@ -238,6 +238,7 @@ impl Run<'_> {
                 self.input,
                 self.base,
                 cache,
+                false,
             )?;
             let time = ValTime {
                 forward: ev.timing.forward,
@@ -602,7 +603,16 @@ fn test_best(run: &Run) -> Result<(Stats, usize)> {
     let best = Checkpoint::load(&run.run_dir.join("best.bpk"))?;
     let model = best.model("ema", run.base)?;
     let input = best.header.model.input_size();
-    let test = evaluate_ids(&model, run.real, &run.split.test, input, run.base, None)?.stats;
+    let test = evaluate_ids(
+        &model,
+        run.real,
+        &run.split.test,
+        input,
+        run.base,
+        None,
+        false,
+    )?
+    .stats;
     run_files::write_test(
         run.run_dir,
         &TestRecord {
@@ -767,6 +777,7 @@ mod tests {
             None,
             None,
             None,
+            false,
         )
         .unwrap();
         let logged = recs[2].val.as_ref().unwrap();

@@ -32,7 +32,8 @@ pub fn smoke_opts(dir: &Path) -> TrainOptions {
 
 /// `eval --json` of `checkpoint` on `split` (`data`: `--data`).
 pub fn eval_stats(checkpoint: &Path, split: SplitName, data: Option<&str>) -> StatsRecord {
-    serde_json::from_str(&eval_cmd(checkpoint, split, data, None, None, true).unwrap()).unwrap()
+    serde_json::from_str(&eval_cmd(checkpoint, split, data, None, None, true, false).unwrap())
+        .unwrap()
 }
 
 /// What [`smoke_scenario`] leaves for a test's own checks.
@@ -128,7 +129,16 @@ pub fn smoke_scenario(dir: &Path, config: &str, loss_names: &[&str]) -> SmokeRun
     image::RgbImage::from_pixel(80, 60, image::Rgb([200, 180, 150]))
         .save(img_dir.join("a.png"))
         .unwrap();
-    predict_cmd(&best, &img_dir, &dir.join("pred"), PREDICT_CONF, None, None).unwrap();
+    predict_cmd(
+        &best,
+        &img_dir,
+        &dir.join("pred"),
+        PREDICT_CONF,
+        None,
+        None,
+        false,
+    )
+    .unwrap();
     assert!(dir.join("pred/a.png").is_file());
     chicktrain::annotations::coco::load_results(&dir.join("pred/results.json")).unwrap();
     // At another inference size (`--imgsz`, the model is convolutional) the boxes still
@@ -140,6 +150,7 @@ pub fn smoke_scenario(dir: &Path, config: &str, loss_names: &[&str]) -> SmokeRun
         PREDICT_CONF,
         None,
         Some(128),
+        false,
     )
     .unwrap();
     let dets =
@@ -149,6 +160,21 @@ pub fn smoke_scenario(dir: &Path, config: &str, loss_names: &[&str]) -> SmokeRun
             d[0] >= 0.0 && d[1] >= 0.0 && d[0] + d[2] <= 80.01 && d[1] + d[3] <= 60.01,
             "{d:?}"
         );
+    }
+    // `--augment`: the eight views of the 80 × 60 image (four of them 60 × 80) fused
+    // back into it: boxes inside it, masks of its size, scores above --conf.
+    let conf = 0.01;
+    predict_cmd(&best, &img_dir, &dir.join("tta"), conf, None, None, true).unwrap();
+    let dets = chicktrain::annotations::coco::load_results(&dir.join("tta/results.json")).unwrap();
+    for d in &dets {
+        let b = d.bbox.unwrap();
+        assert!(
+            b[0] >= 0.0 && b[1] >= 0.0 && b[0] + b[2] <= 80.01 && b[1] + b[3] <= 60.01,
+            "{b:?}"
+        );
+        assert!(d.score > conf as f64 && d.score <= 1.0, "{}", d.score);
+        let rle = d.segmentation.as_ref().unwrap().to_rle(60, 80).unwrap();
+        assert_eq!((rle.width, rle.height), (80, 60));
     }
 
     // --resume continues from last.bpk to a third epoch (without --smoke, which caps
