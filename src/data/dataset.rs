@@ -227,7 +227,8 @@ impl RealSet {
         Ok((Letterbox::new(orig, input).image(&img), orig))
     }
 
-    /// The image at its original size (checked against its annotation's).
+    /// The image at its original size (a file's size is checked against its annotation's;
+    /// a proxy-real render is made at it).
     pub fn original(&self, id: u64) -> Result<RgbImage> {
         let im = self
             .gt
