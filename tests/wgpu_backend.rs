@@ -109,10 +109,24 @@ fn wgpu_and_flex_train_alike_and_read_each_others_checkpoints() {
             "{}: outputs differ by {rel:?} (bound {OUTPUT_TOL})",
             run.display()
         );
-        let sg =
-            score_checkpoint(&best, SplitName::Test, None, Some(DeviceKind::Wgpu), None).unwrap();
-        let sf =
-            score_checkpoint(&best, SplitName::Test, None, Some(DeviceKind::Flex), None).unwrap();
+        let sg = score_checkpoint(
+            &best,
+            SplitName::Test,
+            None,
+            Some(DeviceKind::Wgpu),
+            None,
+            false,
+        )
+        .unwrap();
+        let sf = score_checkpoint(
+            &best,
+            SplitName::Test,
+            None,
+            Some(DeviceKind::Flex),
+            None,
+            false,
+        )
+        .unwrap();
         for (x, y) in sg
             .stats
             .bbox
