@@ -109,24 +109,11 @@ fn wgpu_and_flex_train_alike_and_read_each_others_checkpoints() {
             "{}: outputs differ by {rel:?} (bound {OUTPUT_TOL})",
             run.display()
         );
-        let sg = score_checkpoint(
-            &best,
-            SplitName::Test,
-            None,
-            Some(DeviceKind::Wgpu),
-            None,
-            false,
-        )
-        .unwrap();
-        let sf = score_checkpoint(
-            &best,
-            SplitName::Test,
-            None,
-            Some(DeviceKind::Flex),
-            None,
-            false,
-        )
-        .unwrap();
+        // The same checkpoint on each device, one view.
+        let score = |device| {
+            score_checkpoint(&best, SplitName::Test, None, Some(device), None, false).unwrap()
+        };
+        let (sg, sf) = (score(DeviceKind::Wgpu), score(DeviceKind::Flex));
         for (x, y) in sg
             .stats
             .bbox
