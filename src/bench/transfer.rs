@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{self, Config, DeviceKind};
 use crate::eval::report::{stat_cells, stat_columns, Table};
-use crate::render::randomize::Randomize;
+use crate::config::Randomize;
 use crate::train::checkpoint::Checkpoint;
 use crate::train::evaluate::{score_checkpoint, SplitName};
 use crate::train::run_files::{self, IouStats};

@@ -8,8 +8,8 @@ use anyhow::{Context, Result};
 
 use crate::annotations::coco::{load_results, CocoDataset};
 use crate::annotations::{labelme, yolo_export};
+use crate::config::Randomize;
 use crate::eval::{evaluate, IouType};
-use crate::render::randomize::Randomize;
 
 /// `chicktrain coco-eval`: the pycocotools summary (or one JSON object) for a GT/DT pair.
 pub fn coco_eval(gt: &Path, dt: &Path, iou_type: IouType, json: bool) -> Result<String> {

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::render::randomize::Randomize;
+use super::randomize::Randomize;
 
 /// Where the "real" images come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -77,7 +77,7 @@ pub struct DataConfig {
     pub cache: PathBuf,
     /// Domain-randomisation groups of the synthetic renders (`[data.randomize]`, e.g.
     /// `lighting = false`); the proxy-real set is never randomised. See
-    /// `render::randomize`.
+    /// `config::randomize`.
     #[serde(default = "default_randomize")]
     pub randomize: Randomize,
 }

@@ -220,7 +220,7 @@ mod tests {
 #[cfg(test)]
 mod key_tests {
     use super::*;
-    use crate::render::randomize::Randomize;
+    use crate::config::Randomize;
 
     /// A render with groups on must not reuse a cache written when the groups drew
     /// nothing (same options, base-look pixels), and the base look keeps its key.

@@ -33,7 +33,6 @@ pub mod noise;
 pub mod parts;
 pub mod pile;
 pub mod preset;
-pub mod randomize;
 pub mod ranges;
 pub mod scene;
 pub mod screen;

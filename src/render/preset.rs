@@ -18,9 +18,9 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use super::labels::LabelThresholds;
-use super::randomize::Randomize;
 use super::ranges::DomainRanges;
 use super::skin::PoseRanges;
+use crate::config::Randomize;
 
 /// Image file format of rendered datasets.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

@@ -1,6 +1,6 @@
 //! The parameter ranges the `scene`, `distractors`, `lighting` and `camera`
 //! randomisation groups draw from when they are on (`[randomize]` switches in
-//! [`super::randomize::Randomize`]). They widen the preset's base ranges rather than
+//! [`crate::config::Randomize`]). They widen the preset's base ranges rather than
 //! replace the base look: with a group off its ranges are never read. Kept apart from the
 //! base options so the base look's serialised options (and cache keys) stay as they were:
 //! the defaults are left out of serialisation.

@@ -1,10 +1,13 @@
 //! Domain-randomisation groups: which families of render choices are widened beyond the
 //! preset's base look. Each group draws from its own RNG stream
-//! ([`super::group_rng`], `Streams::rng(opts, name)` with the group's name), so turning
+//! ([`crate::render::group_rng`], `Streams::rng(opts, name)` with the group's name), so turning
 //! one off leaves every other choice of the image unchanged — which is what the
 //! per-group ablation (`train` with one group off in turn, scored cross-domain) needs.
 //! All off is the renderer as it was before the groups existed (same pixels, same cache
 //! key). The ranges each group draws from are documented in one table in README.md.
+//!
+//! It lives in `config` because it is a config table (`[data.randomize]`) and the
+//! config is the foundation layer; the renderer reads it.
 
 use serde::{Deserialize, Serialize};
 
