@@ -17,10 +17,10 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use burn::tensor::{Device, Tensor, TensorData};
+use chicktrain::infer::checkpoint::Checkpoint;
+use chicktrain::infer::detector::Detector;
 use chicktrain::model::yolo::ultralytics::{apply_all, read_ultralytics};
 use chicktrain::model::yolo::{Scale, YoloSegConfig};
-use chicktrain::train::checkpoint::Checkpoint;
-use chicktrain::train::detector::Detector;
 use chicktrain::util::safetensors;
 use chicktrain::util::state_dict::HostTensor;
 use chicktrain::util::tensor::to_host;

@@ -25,6 +25,7 @@ const LAYERS: &[(&str, &[&str])] = &[
     ("loader", &["data"]),
     ("models", &["model"]),
     ("evaluator", &["eval"]),
+    ("inference", &["infer"]),
     ("trainer", &["train"]),
     ("on top", &["bench", "experiments", "commands"]),
 ];
@@ -50,13 +51,6 @@ const ALLOWED_FILE_CYCLES: &[&[&str]] = &[
         "src/render/variety.rs",
     ],
     &["src/render/line_surface.rs", "src/render/material.rs"],
-    &[
-        "src/train/checkpoint.rs",
-        "src/train/detector.rs",
-        "src/train/device.rs",
-        "src/train/evaluate.rs",
-        "src/train/precision.rs",
-    ],
     &[
         "src/util/pytorch.rs",
         "src/util/safetensors.rs",

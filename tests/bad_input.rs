@@ -11,8 +11,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use chicktrain::train::checkpoint::Checkpoint;
-use chicktrain::train::detector::DetectorConfig;
+use chicktrain::infer::checkpoint::Checkpoint;
+use chicktrain::infer::detector::DetectorConfig;
 use common::*;
 use image::ImageEncoder;
 

@@ -4,7 +4,7 @@
 
 mod common;
 
-use chicktrain::train::checkpoint::Checkpoint;
+use chicktrain::infer::checkpoint::Checkpoint;
 use common::*;
 
 #[test]

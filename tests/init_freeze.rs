@@ -14,10 +14,10 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use burn::tensor::Device;
+use chicktrain::infer::checkpoint::Checkpoint;
+use chicktrain::infer::detector::{Detector, DetectorConfig};
 use chicktrain::model::weights::{collect, snapshot_data};
 use chicktrain::model::yolo::YoloSegConfig;
-use chicktrain::train::checkpoint::Checkpoint;
-use chicktrain::train::detector::{Detector, DetectorConfig};
 use chicktrain::train::init::load_init;
 use chicktrain::train::trainer::{train, TrainOptions};
 use common::smoke::{shipped, smoke_opts};

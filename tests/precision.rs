@@ -7,9 +7,9 @@ use std::path::Path;
 use burn::tensor::{Device, FloatDType};
 use chicktrain::commands::train::SplitName;
 use chicktrain::config::Precision;
-use chicktrain::train::checkpoint::Checkpoint;
+use chicktrain::infer::checkpoint::Checkpoint;
+use chicktrain::infer::precision::all_in;
 use chicktrain::train::loss_scale::MAX_SCALE;
-use chicktrain::train::precision::all_in;
 use chicktrain::train::run_files::{read_metrics, EpochRecord};
 
 mod common;

@@ -7,7 +7,7 @@ mod common;
 
 use std::path::Path;
 
-use chicktrain::train::checkpoint::Checkpoint;
+use chicktrain::infer::checkpoint::Checkpoint;
 use common::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -78,8 +78,8 @@ fn resumed_run_matches_the_uninterrupted_one() {
         wb.model("ema", &dev).unwrap(),
     );
     let x = burn::tensor::Tensor::<4>::full([1, 3, 64, 64], 0.5, &dev);
-    let logits = |m: &chicktrain::train::detector::Detector, x| match m {
-        chicktrain::train::detector::Detector::Yolo(m) => m.forward(x).cls_logits,
+    let logits = |m: &chicktrain::infer::detector::Detector, x| match m {
+        chicktrain::infer::detector::Detector::Yolo(m) => m.forward(x).cls_logits,
         _ => panic!("quickstart trains a YOLO model"),
     };
     let (oa, ob) = (logits(&ea, x.clone()), logits(&eb, x));

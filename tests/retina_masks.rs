@@ -15,9 +15,9 @@ use std::sync::Arc;
 use chicktrain::annotations::mask::Mask;
 use chicktrain::annotations::rle::Rle;
 use chicktrain::data::letterbox::Letterbox;
+use chicktrain::infer::validate::to_coco;
 use chicktrain::model::detection::Detection;
 use chicktrain::model::instance_mask::{paste_roi_mask, prototype_mask, MaskSource, Prototypes};
-use chicktrain::train::evaluate::to_coco;
 use serde_json::Value;
 
 fn load() -> Value {

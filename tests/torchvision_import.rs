@@ -12,6 +12,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, Tensor, TensorData};
+use chicktrain::infer::detector::{Detector, DetectorConfig};
 use chicktrain::model::maskrcnn::mask_head::MaskHeadConfig;
 use chicktrain::model::maskrcnn::roi_heads::RoiHeadsConfig;
 use chicktrain::model::maskrcnn::torchvision::{
@@ -19,7 +20,6 @@ use chicktrain::model::maskrcnn::torchvision::{
 };
 use chicktrain::model::maskrcnn::{MaskRcnnConfig, STRIDES};
 use chicktrain::model::weights::{self, apply_named, snapshot_data};
-use chicktrain::train::detector::{Detector, DetectorConfig};
 use chicktrain::train::init::load_init;
 use chicktrain::util::state_dict::HostData;
 

@@ -10,12 +10,13 @@ use chicktrain::annotations::coco::{CocoCategory, CocoDataset, CocoImage};
 use chicktrain::data::batch::collate;
 use chicktrain::data::dataset::{from_rendered, render_options};
 use chicktrain::eval::{evaluate, IouType};
+use chicktrain::infer::detector::{VAL_CONF, VAL_IOU, VAL_MAX_DET};
+use chicktrain::infer::validate::to_coco;
 use chicktrain::model::yolo::loss::{yolo_loss, LossWeights};
 use chicktrain::model::yolo::postprocess::postprocess;
 use chicktrain::model::yolo::{Scale, YoloSegConfig};
 use chicktrain::render::export::annotations;
 use chicktrain::render::render_sample;
-use chicktrain::train::evaluate::{to_coco, VAL_CONF, VAL_IOU, VAL_MAX_DET};
 
 const SIZE: u32 = 96;
 const STEPS: usize = 300;

@@ -6,7 +6,7 @@
 
 use chicktrain::commands::train::{eval_cmd, SplitName};
 use chicktrain::config::{self, DeviceKind};
-use chicktrain::train::checkpoint::Checkpoint;
+use chicktrain::infer::checkpoint::Checkpoint;
 use chicktrain::train::run_files::{read_test, StatsRecord};
 use chicktrain::train::trainer::{train, TrainOptions};
 

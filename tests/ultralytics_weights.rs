@@ -320,12 +320,12 @@ mod common;
 
 /// A checkpoint whose `ema` weights are the fixture's (header as `train` writes it).
 fn checkpoint_of(
-    model: chicktrain::train::detector::Detector,
-    cfg: chicktrain::train::detector::DetectorConfig,
+    model: chicktrain::infer::detector::Detector,
+    cfg: chicktrain::infer::detector::DetectorConfig,
     path: &Path,
 ) {
     use chicktrain::annotations::split::Split;
-    use chicktrain::train::checkpoint::{module_bytes, Checkpoint, Header, FORMAT};
+    use chicktrain::infer::checkpoint::{module_bytes, Checkpoint, Header, FORMAT};
     let config = chicktrain::config::parse(chicktrain::config::SHIPPED[0].1, "q", &[]).unwrap();
     let nc = cfg.num_classes();
     Checkpoint {
@@ -356,7 +356,7 @@ fn checkpoint_of(
 
 #[test]
 fn export_command_writes_the_ultralytics_state_dict() {
-    use chicktrain::train::detector::{Detector, DetectorConfig};
+    use chicktrain::infer::detector::{Detector, DetectorConfig};
     let cfg = tiny_cfg(2);
     let file = fixture("tiny_seg.pt");
     let model = apply_all(
@@ -446,8 +446,8 @@ fn export_command_writes_the_ultralytics_state_dict() {
 /// model without C2PSA (another layer numbering) a clear error naming the file.
 #[test]
 fn model_init_takes_an_ultralytics_checkpoint() {
+    use chicktrain::infer::detector::{Detector, DetectorConfig};
     use chicktrain::model::weights::{collect, snapshot_data};
-    use chicktrain::train::detector::{Detector, DetectorConfig};
     use chicktrain::train::init::load_init;
     let dev = Device::flex();
     let file = fixture("tiny_seg.pt");

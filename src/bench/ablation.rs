@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 
 use crate::config::{self, Config, DeviceKind};
-use crate::train::checkpoint::Checkpoint;
-use crate::train::detector::DetectorConfig;
+use crate::infer::checkpoint::Checkpoint;
+use crate::infer::detector::DetectorConfig;
 use crate::train::trainer::{train, TrainOptions};
 
 use super::accuracy::run_accuracy;

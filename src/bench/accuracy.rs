@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::Result;
 
 use crate::config::DeviceKind;
-use crate::train::evaluate::SplitName;
+use crate::infer::validate::SplitName;
 use crate::train::run_files;
 
 /// Test accuracy of a trained model and what its training took.
@@ -25,7 +25,7 @@ pub struct Accuracy {
 /// Test AP of a checkpoint on its own test split.
 pub fn checkpoint_accuracy(ck: &Path, device: Option<DeviceKind>) -> Result<Accuracy> {
     let score =
-        crate::train::evaluate::score_checkpoint(ck, SplitName::Test, None, device, None, false)?;
+        crate::infer::validate::score_checkpoint(ck, SplitName::Test, None, device, None, false)?;
     Ok(Accuracy {
         bbox: score.stats.bbox,
         segm: score.stats.segm,

@@ -11,7 +11,7 @@ use anyhow::{bail, Context, Result};
 use crate::annotations::split::Split;
 use crate::config::Config;
 use crate::data::dataset::{RealSet, SyntheticSet};
-use crate::train::detector::DetectorConfig;
+use crate::infer::detector::DetectorConfig;
 use crate::train::loader::{epoch_batches, Loader, Mix};
 use crate::util::stats::median;
 

@@ -112,7 +112,7 @@ pub fn bench_models(o: &BenchOptions, quiet: bool) -> Result<String> {
     let cks = o
         .checkpoints
         .iter()
-        .map(|p| crate::train::checkpoint::Checkpoint::load(p).map(|c| (p, c.header.model)))
+        .map(|p| crate::infer::checkpoint::Checkpoint::load(p).map(|c| (p, c.header.model)))
         .collect::<Result<Vec<_>>>()?;
     let mut rows = Vec::new();
     let total = o.variants.len() * o.sizes.len() + o.checkpoints.len();

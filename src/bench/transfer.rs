@@ -20,11 +20,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::config::Randomize;
 use crate::config::{self, Config, DeviceKind};
 use crate::eval::report::{stat_cells, stat_columns, Table};
-use crate::config::Randomize;
-use crate::train::checkpoint::Checkpoint;
-use crate::train::evaluate::{score_checkpoint, SplitName};
+use crate::infer::checkpoint::Checkpoint;
+use crate::infer::validate::{score_checkpoint, SplitName};
 use crate::train::run_files::{self, IouStats};
 use crate::train::trainer::{train, TrainOptions};
 use crate::util::stats::mean_std;

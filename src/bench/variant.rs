@@ -7,10 +7,10 @@ use std::str::FromStr;
 
 use anyhow::{bail, Context, Result};
 
+use crate::infer::detector::DetectorConfig;
 use crate::model::mask2former::Mask2FormerConfig;
 use crate::model::maskrcnn::MaskRcnnConfig;
 use crate::model::yolo::{HeadLevels, Scale, YoloSegConfig};
-use crate::train::detector::DetectorConfig;
 
 /// A model variant by name: `yolo-<n|s>` with optional suffixes `-p45` (heads on P4–P5
 /// only), `-nopsa` (no C2PSA attention), `-w<f>` (width multiplier), `-m<k>` (mask

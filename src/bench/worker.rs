@@ -9,7 +9,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 
 use crate::config::DeviceKind;
-use crate::train::device::device_of;
+use crate::infer::device::device_of;
 
 use super::measure::{measure, Effort, Measurement};
 use super::variant::Variant;

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Result};
 
 use super::onnx::{export_onnx, OnnxExport};
-use crate::train::checkpoint::Checkpoint;
+use crate::infer::checkpoint::Checkpoint;
 
 /// The formats `export` writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -13,13 +13,13 @@ use std::path::Path;
 use anyhow::{bail, Result};
 use burn::tensor::Device;
 
+use crate::infer::checkpoint::Checkpoint;
+use crate::infer::detector::{Detector, DetectorConfig};
 use crate::model::maskrcnn::anchors::AnchorConfig;
 use crate::model::maskrcnn::torchvision::torchvision_state_dict;
 use crate::model::maskrcnn::MaskRcnnConfig;
 use crate::model::yolo::scale::Scaler;
 use crate::model::yolo::ultralytics::ultralytics_state_dict;
-use crate::train::checkpoint::Checkpoint;
-use crate::train::detector::{Detector, DetectorConfig};
 use crate::util::safetensors;
 
 pub fn export(ckpt: &Checkpoint, from: &Path, out: &Path) -> Result<String> {

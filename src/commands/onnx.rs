@@ -13,10 +13,13 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::train::{predict_images, PredictClasses};
 use crate::bench::engines::bench_engines;
 use crate::bench::models::parse_sizes;
 use crate::bench::variant::Variant;
+use crate::infer::checkpoint::Checkpoint;
+use crate::infer::detector::Detector;
+use crate::infer::detector::{VAL_IOU, VAL_MAX_DET};
+use crate::infer::predict::{predict_images, PredictClasses};
 use crate::model::maskrcnn::onnx::{
     export_maskrcnn, OnnxMaskRcnn, BOX_INPUT, BOX_OUTPUTS, LEVELS, MASK_INPUT, MASK_OUTPUT,
 };
@@ -25,9 +28,6 @@ use crate::model::onnx::engine::{set_threads, TractEngine};
 use crate::model::onnx::graph::encode;
 use crate::model::yolo::onnx::{export_yolo, ultralytics_output0, OnnxExportOptions};
 use crate::model::yolo::postprocess::postprocess_layout;
-use crate::train::checkpoint::Checkpoint;
-use crate::train::detector::Detector;
-use crate::train::evaluate::{VAL_IOU, VAL_MAX_DET};
 use crate::util::tensor::to_host;
 use crate::util::write_atomic;
 

@@ -20,7 +20,7 @@ pub enum ScheduleKind {
 
 /// Float type of parameters and activations (`train.precision`). Burn has no autocast:
 /// a reduced type is the device's default float type for the whole run (see
-/// `train::precision`); f16 adds dynamic loss scaling (`train::loss_scale`).
+/// `infer::precision`); f16 adds dynamic loss scaling (`train::loss_scale`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Precision {

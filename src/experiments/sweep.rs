@@ -22,7 +22,7 @@ use anyhow::{bail, Context, Result};
 use crate::config::{self, DeviceKind};
 use crate::eval::plots::{write_png, Panel, Series, PALETTE};
 use crate::eval::report::{stat_cells, stat_columns, Table};
-use crate::train::checkpoint::Checkpoint;
+use crate::infer::checkpoint::Checkpoint;
 use crate::train::run_files;
 use crate::train::smoke::smoke_config;
 use crate::train::trainer::{train, TrainOptions};

@@ -22,7 +22,6 @@ use crate::annotations::split::Split;
 use crate::config::Config;
 
 use super::detector::{Detector, DetectorConfig};
-use super::loss_scale::LossScaler;
 use super::precision::{all_in, f32_copy};
 
 use crate::model::weights::CHICKTRAIN_MAGIC as MAGIC;
@@ -60,7 +59,19 @@ pub struct Header {
     pub val: Option<Stats>,
     /// f16 runs: the loss scaler's state, so `--resume` continues with it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub loss_scale: Option<LossScaler>,
+    pub loss_scale: Option<LossScaleState>,
+}
+
+/// f16 runs: the loss scaler's state as saved. The trainer's `LossScaler` converts from
+/// and to it, so the checkpoint format does not import the training loop; the fields
+/// (and so the header's JSON) are the scaler's.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LossScaleState {
+    pub scale: f32,
+    /// Good steps since the last change of scale.
+    pub good_steps: u32,
+    /// Steps skipped over the run.
+    pub skipped: u64,
 }
 
 /// A checkpoint in memory.
@@ -242,6 +253,7 @@ impl<'a> Reader<'a> {
 mod tests {
     use super::*;
     use crate::annotations::split::Split;
+    use crate::infer::precision::cast_module;
     use crate::model::yolo::{Scale, YoloSegConfig};
     use burn::tensor::{Tensor, TensorData};
 
@@ -308,5 +320,30 @@ mod tests {
         assert!(format!("{:#}", Checkpoint::load(&p).unwrap_err())
             .contains("not a chicktrain checkpoint"));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn casts_round_trip_and_the_f32_path_is_untouched() {
+        // Here rather than beside the casts: module_bytes is the byte-exact comparison.
+        let dev = Device::flex();
+        let m = YoloSegConfig::new(Scale::N, 1)
+            .with_input_size(32)
+            .with_width_mult(0.25)
+            .with_num_masks(4)
+            .init(&dev);
+        assert!(all_in(&m, FloatDType::F32));
+        let before = module_bytes(&m).unwrap();
+        let same = f32_copy(&m);
+        assert_eq!(module_bytes(&same).unwrap(), before);
+        let b = cast_module(m.valid(), FloatDType::BF16);
+        assert!(all_in(&b, FloatDType::BF16) && !all_in(&b, FloatDType::F32));
+        // bf16 → f32 is exact, so a second round trip changes nothing.
+        let back = f32_copy(&b);
+        assert!(all_in(&back, FloatDType::F32));
+        let again = f32_copy(&cast_module(back.valid(), FloatDType::BF16));
+        assert_eq!(module_bytes(&back).unwrap(), module_bytes(&again).unwrap());
+        // The source keeps its type (its running statistics were not cast in place).
+        assert!(all_in(&m, FloatDType::F32));
+        assert_eq!(module_bytes(&m).unwrap(), before);
     }
 }

@@ -21,7 +21,11 @@ use crate::model::yolo::loss::{yolo_loss, LossTerms, LossWeights};
 use crate::model::yolo::postprocess::postprocess;
 use crate::model::yolo::{YoloSeg, YoloSegConfig};
 
-use super::evaluate::{VAL_IOU, VAL_MAX_DET};
+/// Validation postprocess settings of YOLO (ultralytics' val defaults; Mask R-CNN uses
+/// only `VAL_CONF`, below its own threshold).
+pub const VAL_CONF: f32 = 0.001;
+pub const VAL_IOU: f32 = 0.7;
+pub const VAL_MAX_DET: usize = 300;
 
 /// Model config of a checkpoint: the kind and everything needed to rebuild the weights.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

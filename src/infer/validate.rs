@@ -12,25 +12,20 @@ use anyhow::{bail, Context, Result};
 use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 
+use super::tta::{fuse, Fused, View, ViewDetection};
 use crate::annotations::coco::{CocoDataset, Detection, Segmentation};
 use crate::annotations::rle::Rle;
 use crate::data::dataset::RealSet;
 use crate::data::letterbox::Letterbox;
-use crate::eval::tta::{fuse, Fused, View, ViewDetection};
 use crate::eval::{evaluate, IouType};
 use crate::model::detection::Detection as RawDetection;
 
 use super::checkpoint::{Checkpoint, Stats};
-use super::detector::Detector;
+use super::detector::{Detector, VAL_CONF};
 use super::device::device_of;
 use crate::annotations::split::Split;
 use crate::config::{self, DeviceKind};
 
-/// Validation postprocess settings of YOLO (ultralytics' val defaults; Mask R-CNN uses
-/// only `VAL_CONF`, below its own threshold).
-pub const VAL_CONF: f32 = 0.001;
-pub const VAL_IOU: f32 = 0.7;
-pub const VAL_MAX_DET: usize = 300;
 /// Images per inference batch.
 const EVAL_BATCH: usize = 4;
 
@@ -75,7 +70,7 @@ pub fn to_coco(
 /// augmentation; NMS's usual 0.5).
 pub const TTA_IOU: f64 = 0.5;
 
-/// Test-time augmentation of one image (see [`crate::eval::tta`]): `orig` in each of
+/// Test-time augmentation of one image (see [`super::tta`]): `orig` in each of
 /// the eight symmetries of the square, letterboxed to `size × size` and handed to `infer`
 /// (`[1, 3, size, size]` planes → detections at the input); the detections COCO can read
 /// ([`coco_reads`]) of each view are decoded at the view's original size, mapped back to

@@ -79,7 +79,7 @@ impl<M: Module> Ema<M> {
     /// run's precision.
     pub fn new(model: &M, updates: u64) -> Ema<M> {
         Ema {
-            model: super::precision::f32_copy(model),
+            model: crate::infer::precision::f32_copy(model),
             updates,
             frozen: Vec::new(),
         }

@@ -22,8 +22,8 @@ use crate::model::maskrcnn::{self, torchvision};
 use crate::model::weights::{self, Applied, Format};
 use crate::model::yolo::{self, ultralytics};
 
-use super::checkpoint::Checkpoint;
-use super::detector::{Detector, DetectorConfig};
+use crate::infer::checkpoint::Checkpoint;
+use crate::infer::detector::{Detector, DetectorConfig};
 
 /// `model`, with the weights of `path` loaded; the second value says what was loaded
 /// (printed by the trainer). `config` is `model`'s own (the ultralytics mapping needs

@@ -14,6 +14,8 @@
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::infer::checkpoint::LossScaleState;
+
 /// Initial and largest scale: the largest power of two f16 holds.
 pub const MAX_SCALE: f32 = 32768.0;
 /// Below this the gradients overflow unscaled (2⁻¹⁴, f16's smallest normal number).
@@ -37,6 +39,27 @@ impl Default for LossScaler {
             scale: MAX_SCALE,
             good_steps: 0,
             skipped: 0,
+        }
+    }
+}
+
+/// The state a checkpoint saves (`last.bpk`'s header) and `--resume` reads back.
+impl From<LossScaler> for LossScaleState {
+    fn from(s: LossScaler) -> Self {
+        LossScaleState {
+            scale: s.scale,
+            good_steps: s.good_steps,
+            skipped: s.skipped,
+        }
+    }
+}
+
+impl From<LossScaleState> for LossScaler {
+    fn from(s: LossScaleState) -> Self {
+        LossScaler {
+            scale: s.scale,
+            good_steps: s.good_steps,
+            skipped: s.skipped,
         }
     }
 }

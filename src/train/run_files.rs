@@ -16,7 +16,7 @@ use crate::config::{Config, RealKind};
 use crate::eval::STAT_NAMES;
 use crate::util::write_atomic;
 
-use super::checkpoint::Stats;
+use crate::infer::checkpoint::Stats;
 
 /// The 12 pycocotools numbers of one IoU type, as `{"stats": [...]}`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

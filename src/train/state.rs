@@ -11,14 +11,14 @@ use burn::tensor::{Device, FloatDType};
 
 use crate::config::Config;
 
-use super::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header};
-use super::detector::{Detector, DetectorConfig};
 use super::ema::Ema;
 use super::init::load_init;
 use super::loss_scale::LossScaler;
 use super::optim;
-use super::precision::cast_module;
 use super::run_files::{self, EpochRecord};
+use crate::infer::checkpoint::{module_bytes, optim_bytes, Checkpoint, Header};
+use crate::infer::detector::{Detector, DetectorConfig};
+use crate::infer::precision::cast_module;
 use crate::model::freeze::freeze;
 
 /// A new model of `mcfg` on `device` whose weights are drawn on the CPU (`flex`) from
@@ -118,7 +118,12 @@ impl TrainState {
             model,
             ema,
             optim,
-            scaler: f16.then(|| ck.header.loss_scale.unwrap_or_default()),
+            scaler: f16.then(|| {
+                ck.header
+                    .loss_scale
+                    .map(LossScaler::from)
+                    .unwrap_or_default()
+            }),
             epoch: ck.header.epoch,
             best_fitness: ck.header.best_fitness,
             best_epoch: run_files::best_epoch(&records),

@@ -21,18 +21,18 @@ use crate::annotations::split::Split;
 use crate::config::{Config, DeviceKind};
 use crate::data::dataset::{RealSet, SyntheticSet};
 
-use super::checkpoint::{module_bytes, Checkpoint, Header, Stats, FORMAT};
-use super::detector::DetectorConfig;
-use super::device::device_with;
 use super::divergence::{check_weights, At, DivergenceGuard};
-use super::evaluate::{evaluate_ids, InputCache};
 use super::loader::{epoch_batches, mix, Loader, Mix};
-use super::precision::{copy_in, float_dtype, graph_cast};
 use super::run_files::{self, EpochRecord, StatsRecord, TestRecord, ValTime};
 use super::schedule::step_lr;
 use super::smoke::smoke_config;
 use super::state::TrainState;
 use super::{optim, plot};
+use crate::infer::checkpoint::{module_bytes, Checkpoint, Header, Stats, FORMAT};
+use crate::infer::detector::DetectorConfig;
+use crate::infer::device::device_with;
+use crate::infer::precision::{copy_in, float_dtype, graph_cast};
+use crate::infer::validate::{evaluate_ids, InputCache};
 use crate::util::progress;
 
 /// How to run (everything that is not in the config file).
@@ -181,7 +181,7 @@ impl Run<'_> {
             ema_updates: st.ema.updates,
             best_fitness: st.best_fitness,
             val,
-            loss_scale: st.scaler,
+            loss_scale: st.scaler.map(Into::into),
         }
     }
 
@@ -771,9 +771,9 @@ mod tests {
         // checkpoint afresh, every image read again, gives the same stats bit for bit.
         let timed: Vec<bool> = recs.iter().map(|r| r.val_time.is_some()).collect();
         assert_eq!(timed, [false, true, true]);
-        let again = crate::train::evaluate::score_checkpoint(
+        let again = crate::infer::validate::score_checkpoint(
             &run.join("last.bpk"),
-            crate::train::evaluate::SplitName::Val,
+            crate::infer::validate::SplitName::Val,
             None,
             None,
             None,

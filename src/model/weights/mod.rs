@@ -46,7 +46,7 @@ impl Format {
     }
 }
 
-/// The magic line of a chicktrain checkpoint (`train::checkpoint` writes it).
+/// The magic line of a chicktrain checkpoint (`infer::checkpoint` writes it).
 pub const CHICKTRAIN_MAGIC: &[u8] = b"CHICKTRAIN-CKPT1\n";
 
 /// The format of `bytes`, or `None` if it is none of the four.
