@@ -21,9 +21,9 @@ use chicktrain::infer::checkpoint::Checkpoint;
 use chicktrain::infer::detector::Detector;
 use chicktrain::model::yolo::ultralytics::{apply_all, read_ultralytics};
 use chicktrain::model::yolo::{Scale, YoloSegConfig};
-use chicktrain::util::safetensors;
-use chicktrain::util::state_dict::HostTensor;
 use chicktrain::util::tensor::to_host;
+use chicktrain::weights::host::HostTensor;
+use chicktrain::weights::safetensors;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();

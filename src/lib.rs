@@ -38,3 +38,4 @@ pub mod render;
 #[cfg(feature = "train")]
 pub mod train;
 pub mod util;
+pub mod weights;

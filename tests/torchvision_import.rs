@@ -21,7 +21,7 @@ use chicktrain::model::maskrcnn::torchvision::{
 use chicktrain::model::maskrcnn::{MaskRcnnConfig, STRIDES};
 use chicktrain::model::weights::{self, apply_named, snapshot_data};
 use chicktrain::train::init::load_init;
-use chicktrain::util::state_dict::HostData;
+use chicktrain::weights::host::HostData;
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -12,8 +12,9 @@ use chicktrain::model::yolo::ultralytics::{
     apply_all, exported_keys, from_state_dict, read_ultralytics, ultralytics_state_dict,
 };
 use chicktrain::model::yolo::{Scale, YoloSegConfig};
-use chicktrain::util::state_dict::{read_state_dict, HostData, HostTensor};
 use chicktrain::util::{safetensors, tensor::to_host};
+use chicktrain::weights::host::{HostData, HostTensor};
+use chicktrain::weights::state_dict::read_state_dict;
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

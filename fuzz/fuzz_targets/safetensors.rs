@@ -2,7 +2,7 @@
 //! same tensors.
 #![no_main]
 
-use chicktrain::util::safetensors::{parse, to_bytes};
+use chicktrain::weights::safetensors::{parse, to_bytes};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

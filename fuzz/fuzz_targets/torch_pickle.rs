@@ -2,7 +2,8 @@
 //! stack; a module found in the result walks to a state dict or an error.
 #![no_main]
 
-use chicktrain::util::pytorch::{module_state_dict, tensor_dict, unpickle};
+use chicktrain::weights::pickle::unpickle;
+use chicktrain::weights::torch_module::{module_state_dict, tensor_dict};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

@@ -20,7 +20,7 @@ use crate::model::maskrcnn::torchvision::torchvision_state_dict;
 use crate::model::maskrcnn::MaskRcnnConfig;
 use crate::model::yolo::scale::Scaler;
 use crate::model::yolo::ultralytics::ultralytics_state_dict;
-use crate::util::safetensors;
+use crate::weights::safetensors;
 
 pub fn export(ckpt: &Checkpoint, from: &Path, out: &Path) -> Result<String> {
     let cfg = match &ckpt.header.model {

@@ -1,16 +1,13 @@
 //! Small helpers shared across stages, one concept per file: atomic writes (here),
 //! stable hashing ([`hash`]), PNG encoding ([`png`]), progress bars ([`progress`]),
-//! summary statistics ([`stats`]), host copies of tensors ([`tensor`], feature `train`), and
-//! weights files of other frameworks as host state dicts ([`state_dict`]: PyTorch `.pt` via
-//! [`pytorch`], [`safetensors`]).
+//! summary statistics ([`stats`]), host copies of tensors ([`tensor`], feature `train`) and
+//! the Hungarian assignment ([`hungarian`]). Weight files of other frameworks are
+//! `crate::weights`.
 
 pub mod hash;
 pub mod hungarian;
 pub mod png;
 pub mod progress;
-pub mod pytorch;
-pub mod safetensors;
-pub mod state_dict;
 pub mod stats;
 #[cfg(feature = "train")]
 pub mod tensor;

@@ -24,7 +24,7 @@ use anyhow::{bail, Result};
 
 use super::MaskRcnn;
 use crate::model::weights::{collect, snapshot_data, snapshot_f32, Snapshot};
-use crate::util::state_dict::HostTensor;
+use crate::weights::host::HostTensor;
 
 /// What a torchvision state dict holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -747,7 +747,7 @@ mod tests {
         let snaps: Vec<Snapshot> = sd
             .into_iter()
             .map(|(n, t)| match t.data {
-                crate::util::state_dict::HostData::F32(v) => snapshot_f32(n, v, t.shape),
+                crate::weights::host::HostData::F32(v) => snapshot_f32(n, v, t.shape),
                 _ => panic!("{n}: not f32"),
             })
             .collect();

@@ -16,7 +16,8 @@ use anyhow::{bail, Result};
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::tensor::{DType, Tensor, TensorData};
 
-use crate::util::state_dict::{read_state_dict, HostData};
+use crate::weights::host::HostData;
+use crate::weights::state_dict::read_state_dict;
 
 /// One named tensor: burn-store's `TensorSnapshot` (`burn_pack::Tensor`), so a store from
 /// burn-store can feed [`apply`] unchanged.

@@ -26,7 +26,8 @@ use crate::model::weights;
 
 use super::head::REG_MAX;
 use super::{HeadLevels, YoloSeg, YoloSegConfig};
-use crate::util::state_dict::{read_state_dict, HostData, HostTensor, StateDict};
+use crate::weights::host::{HostData, HostTensor};
+use crate::weights::state_dict::{read_state_dict, StateDict};
 
 /// One of our tensors and its ultralytics name.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,51 +1,17 @@
 //! A state dict on the host: named tensors read from a PyTorch `.pt` / `.pth` file
-//! ([`super::pytorch`]) or a safetensors file ([`super::safetensors`]), floats as f32 and
-//! integers as i64, with no model attached. The model layer maps the names.
+//! ([`super::pytorch`]) or a safetensors file ([`super::safetensors`]), by the file's
+//! first bytes, with no model attached. The model layer maps the names.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 
-use super::pytorch::{module_state_dict, tensor_dict, PtFile, Value};
-
-/// Elements of a host tensor, row-major.
-#[derive(Debug, Clone, PartialEq)]
-pub enum HostData {
-    F32(Vec<f32>),
-    I64(Vec<i64>),
-}
-
-/// One tensor of a state dict.
-#[derive(Debug, Clone, PartialEq)]
-pub struct HostTensor {
-    pub shape: Vec<usize>,
-    pub data: HostData,
-    /// The element type in the file (`float16`, `float32`, `int64`, …).
-    pub source_dtype: &'static str,
-}
-
-impl HostTensor {
-    pub fn f32(shape: Vec<usize>, v: Vec<f32>) -> Self {
-        Self {
-            shape,
-            data: HostData::F32(v),
-            source_dtype: "float32",
-        }
-    }
-
-    pub fn numel(&self) -> usize {
-        self.shape.iter().product()
-    }
-
-    /// The elements as f32 (integers converted).
-    pub fn to_f32(&self) -> Vec<f32> {
-        match &self.data {
-            HostData::F32(v) => v.clone(),
-            HostData::I64(v) => v.iter().map(|&x| x as f32).collect(),
-        }
-    }
-}
+use super::host::HostTensor;
+use super::pickle_value::Value;
+use super::pytorch::PtFile;
+use super::torch_module::{module_state_dict, tensor_dict};
+use super::torch_storage::TensorRef;
 
 /// The tensors of a weights file and which object of the file they came from.
 #[derive(Debug, Clone)]
@@ -79,7 +45,7 @@ pub fn read_state_dict(path: &Path, prefer: &[&str]) -> Result<StateDict> {
     })
 }
 
-type Entries = Vec<(String, std::rc::Rc<super::pytorch::TensorRef>)>;
+type Entries = Vec<(String, std::rc::Rc<TensorRef>)>;
 
 fn pick(root: &Value, prefer: &[&str]) -> Result<(Entries, String)> {
     if root.is_module() {

@@ -12,7 +12,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use serde_json::{json, Map, Value};
 
-use super::state_dict::{HostData, HostTensor};
+use super::host::{HostData, HostTensor};
 
 /// Largest header accepted (the format's own reference implementation caps it at 100 MB).
 const MAX_HEADER: u64 = 100 << 20;
@@ -214,7 +214,7 @@ pub fn write(
     tensors: &[(String, HostTensor)],
     metadata: &BTreeMap<String, String>,
 ) -> Result<()> {
-    super::write_atomic(path, &to_bytes(tensors, metadata)?)
+    crate::util::write_atomic(path, &to_bytes(tensors, metadata)?)
 }
 
 #[cfg(test)]
