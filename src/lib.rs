@@ -31,6 +31,8 @@ pub mod eval;
 #[cfg(feature = "train")]
 pub mod experiments;
 #[cfg(feature = "train")]
+pub mod export;
+#[cfg(feature = "train")]
 pub mod infer;
 #[cfg(feature = "train")]
 pub mod model;

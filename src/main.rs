@@ -8,7 +8,6 @@ use clap::{Args, Parser, Subcommand};
 use chicktrain::commands::bench::{self as bench_cmd, EffortFlags};
 use chicktrain::commands::data;
 use chicktrain::commands::export as export_cmd;
-use chicktrain::commands::onnx as onnx_cmd;
 use chicktrain::commands::train::{self as train_cmd, SplitName};
 use chicktrain::config::DeviceKind;
 use chicktrain::eval::IouType;
@@ -492,7 +491,7 @@ impl BenchWhat {
                 warmup,
                 threads,
                 save_onnx,
-            } => onnx_cmd::bench_engines_cmd(
+            } => bench_cmd::bench_engines_cmd(
                 &variants,
                 &sizes,
                 warmup,
@@ -589,7 +588,7 @@ fn run(cli: Cli) -> anyhow::Result<String> {
             imgsz,
             augment,
         }) => match (checkpoint, onnx) {
-            (_, Some(onnx)) => onnx_cmd::predict_onnx(&onnx, &input, &out, conf, threads, augment),
+            (_, Some(onnx)) => train_cmd::predict_onnx(&onnx, &input, &out, conf, threads, augment),
             (Some(c), None) => {
                 train_cmd::predict_cmd(&c, &input, &out, conf, device, imgsz, augment)
             }

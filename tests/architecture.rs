@@ -26,6 +26,7 @@ const LAYERS: &[(&str, &[&str])] = &[
     ("models", &["model"]),
     ("evaluator", &["eval"]),
     ("inference", &["infer"]),
+    ("export", &["export"]),
     ("trainer", &["train"]),
     ("on top", &["bench", "experiments", "commands"]),
 ];

@@ -1,20 +1,24 @@
-//! The measurement commands: `bench models`, `bench ablation`, `bench transfer`, the hidden per-row
+//! The measurement commands: `bench models`, `bench engines`, `bench ablation`, `bench transfer`, the hidden per-row
 //! `bench model-worker`, and the paper's experiment `sweep`. Defaults that depend on
 //! several flags at once (which grid, which folder) are decided here, not in `main`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 
 use crate::bench::ablation::{ablation, AblationOptions};
+use crate::bench::engines::bench_engines;
 use crate::bench::measure::Effort;
 use crate::bench::models as bm;
+use crate::bench::models::parse_sizes;
 use crate::bench::transfer::{transfer, TransferOptions};
+use crate::bench::variant::Variant;
 use crate::bench::worker::worker;
 use crate::config::{self, DeviceKind};
 /// `chicktrain sweep` is the experiment itself: [`sweep`] over [`SweepOptions`], the
 /// counts parsed by [`parse_counts`].
 pub use crate::experiments::sweep::{parse_counts, sweep, SweepOptions};
+use crate::util::all_cores;
 
 /// Per-row effort flags; unset ones keep the base (the defaults, or `--quick`'s).
 #[derive(Clone, Copy, Debug, Default)]
@@ -196,4 +200,28 @@ pub fn model_worker(
     device: DeviceKind,
 ) -> Result<String> {
     worker(variant, size, effort.over(Effort::default()), device)
+}
+
+/// `chicktrain bench engines --variants yolo-n --sizes 256,640`: flex vs tract latency.
+pub fn bench_engines_cmd(
+    variants: &str,
+    sizes: &str,
+    warmup: usize,
+    repeats: usize,
+    threads: Option<usize>,
+    save: Option<&Path>,
+) -> Result<String> {
+    let vs = variants
+        .split(',')
+        .map(|v| v.trim().parse())
+        .collect::<Result<Vec<Variant>>>()?;
+    let sizes = parse_sizes(sizes)?;
+    bench_engines(
+        &vs,
+        &sizes,
+        warmup,
+        repeats,
+        threads.unwrap_or_else(all_cores),
+        save,
+    )
 }

@@ -1,13 +1,13 @@
 //! `chicktrain export --checkpoint X.bpk --format onnx|safetensors [--out PATH]`: a
 //! checkpoint's weights in a format other tools read. Each format lives in its own file
-//! ([`super::onnx`], [`super::export_safetensors`]); this file only picks one and the
-//! default output path. Both write atomically: a failed export leaves no partial file.
+//! ([`crate::export::onnx`], [`crate::export::safetensors`]); this file only picks one and
+//! the default output path. Both write atomically: a failed export leaves no partial file.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 
-use super::onnx::{export_onnx, OnnxExport};
+use crate::export::onnx::{export_onnx, OnnxExport};
 use crate::infer::checkpoint::Checkpoint;
 
 /// The formats `export` writes.
@@ -71,7 +71,7 @@ pub fn export_cmd(r: &ExportRequest) -> Result<String> {
         }),
         ExportFormat::Safetensors => {
             let ckpt = Checkpoint::load(&r.checkpoint)?;
-            super::export_safetensors::export(&ckpt, &r.checkpoint, &out)
+            crate::export::safetensors::export(&ckpt, &r.checkpoint, &out)
         }
     }
 }

@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::Result;
 
 use crate::config::{self, DeviceKind};
+pub use crate::infer::onnx::predict_onnx;
 use crate::infer::predict::predict_checkpoint;
 pub use crate::infer::predict::PREDICT_CONF;
 use crate::infer::validate::score_checkpoint;

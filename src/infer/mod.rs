@@ -2,7 +2,8 @@
 //! family sits behind ([`detector`]), checkpoint files ([`checkpoint`]), the device and
 //! float type a model runs in ([`device`], [`precision`]), scoring a model on a split
 //! with the COCO evaluator ([`validate`]: per-epoch validation, `eval`, the test split),
-//! test-time augmentation ([`tta`]) and `predict` on image files ([`predict`]).
+//! test-time augmentation ([`tta`]) and `predict` on image files ([`predict`]), with a
+//! checkpoint or an ONNX export through tract ([`onnx`]).
 //!
 //! It sits above the models and the evaluator and below the trainer: `eval`, `predict`,
 //! `export` and `bench` run a trained model without importing the training loop
@@ -12,6 +13,7 @@
 pub mod checkpoint;
 pub mod detector;
 pub mod device;
+pub mod onnx;
 pub mod precision;
 pub mod predict;
 pub mod tta;

@@ -3,7 +3,7 @@
 //! augmentation, the eight views fused), overlay PNGs, `results.json` (COCO results) and
 //! `images.json` (the image ids). Any engine plugs in as a closure from an image's
 //! planes to detections: a checkpoint's weights here, the ONNX graph through tract in
-//! `commands::onnx`.
+//! [`super::onnx`].
 
 use std::path::{Path, PathBuf};
 

@@ -17,6 +17,11 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
+/// Threads that use every core of this machine (1 when the count is unknown).
+pub fn all_cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
 /// Writes `bytes` to `path` through a temp file in the same folder and a rename, so a
 /// crash at any moment leaves either the old file or the new one, never a torn one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
