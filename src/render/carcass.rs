@@ -9,7 +9,7 @@
 //! each a different mesh with the same skeleton, so `skin.rs` poses them all.
 //!
 //! No permissively licensed carcass scan exists (`shared/notes/renderer.md`), so the asset
-//! is generated here and written to `assets/carcass.glb` by [`write_default_asset`]; the
+//! is generated here and written to `assets/carcass.glb` by `glb::write_default_asset`; the
 //! renderer embeds that file. Units are metres. The carcass frame is: +x towards the neck,
 //! +y to the bird's left, +z out of the breast (breast-up rest pose, back at -z).
 
@@ -650,16 +650,6 @@ fn surface_nets(sdf: &Sdf, lo: Vec3, hi: Vec3, cell: f32) -> (Vec<Vec3>, Vec<u32
 
 /// Grid cell of the committed asset (metres).
 pub const DEFAULT_CELL: f32 = 0.004;
-
-/// Generates the default carcass and writes it as a skinned .glb.
-pub fn write_default_asset(path: &std::path::Path) -> anyhow::Result<()> {
-    let mesh = generate(DEFAULT_CELL);
-    let bytes = super::glb::to_glb(&mesh)?;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
-    }
-    std::fs::write(path, bytes).map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
-}
 
 #[cfg(test)]
 mod tests {

@@ -5,69 +5,15 @@
 //! cast shadows like any triangle, but are never labelled: their triangles carry
 //! instance numbers from [`PROP_BASE`] up, the tracer shades them with a
 //! [`PropMaterial`], and the label step turns their ids into background
-//! ([`is_prop_id`]), so a carcass's visible mask loses the pixels a distractor covers.
+//! ([`super::prop_material::is_prop_id`]), so a carcass's visible mask loses the pixels
+//! a distractor covers.
 
 use glam::{Quat, Vec2, Vec3};
 use rand::Rng;
 
-use super::material::{srgb8, Surface};
-use super::noise::fbm3;
+use super::prop_material::{PropKind, PropMaterial, PROP_BASE};
+use super::surface::srgb8;
 use super::trace::Geometry;
-
-/// First triangle instance number of distractors (carcasses are 0..64).
-pub const PROP_BASE: u16 = 0x8000;
-
-/// True for an id-buffer value (instance + 1) that belongs to a distractor.
-#[inline]
-pub fn is_prop_id(id: u16) -> bool {
-    id > PROP_BASE
-}
-
-/// The kinds of distractor.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PropKind {
-    Glove,
-    Hand,
-    Shackle,
-    Knife,
-    Scraper,
-    Packaging,
-    FatScrap,
-}
-
-/// A distractor's appearance: constant material with a little low-frequency variation.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PropMaterial {
-    pub kind: PropKind,
-    pub albedo: Vec3,
-    pub f0: f32,
-    pub roughness: f32,
-    /// Metal-like look (high f0, little diffuse); kept below 0.5 so the tracer gives it
-    /// the room's specular (only the plate traces reflection rays).
-    pub metallic: f32,
-    pub wrap: f32,
-    pub sss_tint: Vec3,
-    /// Amplitude of the colour variation.
-    pub texture: f32,
-    pub seed: u64,
-}
-
-impl PropMaterial {
-    /// Surface at world point `p` (props are rigid: world = texture space).
-    pub fn surface(&self, p: Vec3, n: Vec3) -> Surface {
-        let v = fbm3(self.seed, p * 35.0, 2);
-        Surface {
-            albedo: self.albedo * (1.0 - 0.5 * self.texture + self.texture * v),
-            normal: n,
-            f0: Vec3::splat(self.f0),
-            roughness: self.roughness,
-            metallic: self.metallic,
-            wrap: self.wrap,
-            sss_tint: self.sss_tint,
-            coat: 0.0,
-        }
-    }
-}
 
 /// Triangles of one prop in its local frame (z up, resting on z = 0 where it lies).
 #[derive(Default)]
@@ -487,6 +433,7 @@ pub fn place<R: Rng>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::render::prop_material::is_prop_id;
     use rand::SeedableRng;
 
     #[test]

@@ -17,8 +17,8 @@ use std::sync::{Arc, OnceLock};
 
 use rand::Rng;
 
+use super::asset::Asset;
 use super::carcass::{self, Body};
-use super::scene::Asset;
 
 /// One body family.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

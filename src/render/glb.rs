@@ -568,6 +568,16 @@ pub fn default_carcass() -> Result<Mesh, GlbError> {
     from_slice(DEFAULT_CARCASS_GLB, "<embedded assets/carcass.glb>")
 }
 
+/// Generates the default carcass and writes it as a skinned .glb.
+pub fn write_default_asset(path: &std::path::Path) -> anyhow::Result<()> {
+    let mesh = super::carcass::generate(super::carcass::DEFAULT_CELL);
+    let bytes = to_glb(&mesh)?;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    std::fs::write(path, bytes).map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -67,7 +67,7 @@ pub fn amodal_masks(geo: &Geometry, cam: &Camera, n_instances: usize) -> Vec<Vec
     // rasterise instances in parallel (each owns its mask).
     let mut ranges = vec![(usize::MAX, 0usize); n_instances];
     for (t, &inst) in geo.tri_instance.iter().enumerate() {
-        // Distractors (instance numbers from `distractor::PROP_BASE`) get no mask.
+        // Distractors (instance numbers from `prop_material::PROP_BASE`) get no mask.
         let Some(r) = ranges.get_mut(inst as usize) else {
             continue;
         };

@@ -9,9 +9,9 @@
 use glam::{Vec2, Vec3};
 use rand::Rng;
 
-use super::material::{srgb8, Surface};
 use super::noise::{cellular3, fbm2, value2};
 use super::ranges::DomainRanges;
+use super::surface::{srgb8, Surface};
 
 /// Stainless finishes.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -10,23 +10,7 @@ use glam::{Vec2, Vec3};
 use rand::Rng;
 
 use super::noise::{cellular3, fbm2, fbm3, value2, value3};
-
-/// What the integrator needs to know about a surface point.
-#[derive(Clone, Copy, Debug)]
-pub struct Surface {
-    pub albedo: Vec3,
-    pub normal: Vec3,
-    /// Specular reflectance at normal incidence.
-    pub f0: Vec3,
-    pub roughness: f32,
-    pub metallic: f32,
-    /// Wrap-lighting amount (0 = Lambert); stands in for subsurface scattering.
-    pub wrap: f32,
-    /// Colour of light that scattered under the skin (the wrapped part).
-    pub sss_tint: Vec3,
-    /// Wet film: a second, sharp specular lobe (F0 at normal incidence; 0 = none).
-    pub coat: f32,
-}
+use super::surface::{srgb8, Surface};
 
 /// Per-carcass skin parameters.
 #[derive(Clone, Debug, PartialEq)]
@@ -91,16 +75,6 @@ pub fn skin_tone(t: f32) -> Vec3 {
     let x = t.clamp(0.0, 1.0) * (stops.len() - 1) as f32;
     let i = (x as usize).min(stops.len() - 2);
     stops[i].lerp(stops[i + 1], x - i as f32)
-}
-
-/// Linear value of an sRGB byte triple.
-pub fn srgb8(r: u8, g: u8, b: u8) -> Vec3 {
-    let f = super::sensor::srgb_to_linear;
-    Vec3::new(
-        f(r as f32 / 255.0),
-        f(g as f32 / 255.0),
-        f(b as f32 / 255.0),
-    )
 }
 
 impl SkinMaterial {

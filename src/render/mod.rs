@@ -9,13 +9,17 @@
 //!   sensor, encode).
 //! * [`cache::load_or_render`]: one sample through the on-disk render cache.
 //!
-//! One concept per file: `carcass` (generator), `glb` (asset I/O), `mesh`, `skin` (poses),
-//! `pile` (heightfield drop), `camera`, `light`, `material`, `noise`, `trace` (BVH rays +
-//! shading), `screen` (raster primary visibility, shadow filter, crevices), `sensor`,
-//! `labels`, `scene` (sampling), `preset` (options), `export` (COCO + preview), `cache`;
+//! One concept per file: `carcass` (generator), `glb` (asset I/O), `asset` (the loaded
+//! carcass asset), `mesh`, `skin` (poses), `pile` (heightfield drop), `camera`, `light`,
+//! `surface` (what a material answers), `material` (skin, plate), `line_surface` (belt),
+//! `prop_material` (distractors' look and ids), `distractor` (their meshes), `noise`,
+//! `trace` (BVH rays + shading), `screen` (raster primary visibility, shadow filter,
+//! crevices), `sensor`, `labels`, `scene` (sampling), `preset` (options), `export`
+//! (COCO + preview), `cache`;
 //! the carcass randomisation group: `family` (body families), `parts` (wings and legs
 //! posed or cut), `variety` (per-carcass draws: family, size, parts, skin marks, tears).
 
+pub mod asset;
 pub mod cache;
 pub mod camera;
 pub mod carcass;
@@ -33,12 +37,14 @@ pub mod noise;
 pub mod parts;
 pub mod pile;
 pub mod preset;
+pub mod prop_material;
 pub mod ranges;
 pub mod scene;
 pub mod screen;
 pub mod sensor;
 pub mod settle;
 pub mod skin;
+pub mod surface;
 pub mod trace;
 pub mod variety;
 
@@ -179,7 +185,7 @@ fn render_traced(
     index: u64,
 ) -> anyhow::Result<(RenderedSample, Vec<u16>)> {
     opts.validate()?;
-    let asset = scene::asset(opts.carcass.as_ref())?;
+    let asset = asset::asset(opts.carcass.as_ref())?;
     let t0 = Instant::now();
     let mut rng = image_rng(opts, seed, index);
     let streams = scene::Streams { seed, index };
@@ -200,7 +206,7 @@ fn render_traced(
     // Distractors are never labelled: their pixels are background in the id buffer.
     let traced_ids = frame.ids.clone();
     for id in frame.ids.iter_mut() {
-        if distractor::is_prop_id(*id) {
+        if prop_material::is_prop_id(*id) {
             *id = 0;
         }
     }
@@ -259,7 +265,7 @@ pub const PREVIEW_TILES: usize = 16;
 pub fn render_dataset(opts: &RenderOptions, out_dir: &Path, progress: bool) -> anyhow::Result<()> {
     use crate::annotations::coco::{CocoCategory, CocoDataset, CocoImage};
     opts.validate()?;
-    scene::asset(opts.carcass.as_ref())?;
+    asset::asset(opts.carcass.as_ref())?;
     let img_dir = out_dir.join("images");
     std::fs::create_dir_all(&img_dir)
         .with_context(|| format!("cannot create {}", img_dir.display()))?;
@@ -415,7 +421,7 @@ impl std::fmt::Display for BenchReport {
 /// the throughput a dataset render or the training loader sees).
 pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::Result<BenchReport> {
     opts.validate()?;
-    let asset = scene::asset(opts.carcass.as_ref())?;
+    let asset = asset::asset(opts.carcass.as_ref())?;
     // Warm-up (asset parse, family meshes, thread pool start) outside the timed loop.
     if opts.randomize.carcass && opts.carcass.is_none() {
         family::Family::prepare_all();
@@ -747,7 +753,7 @@ mod randomize_tests {
             let (s, traced) = render_traced(&o, 2, i).unwrap();
             prop_px += traced
                 .iter()
-                .filter(|&&v| distractor::is_prop_id(v))
+                .filter(|&&v| prop_material::is_prop_id(v))
                 .count();
             let anns = export::annotations(&s.ids, 96, 96, &s.instances, 1, 1);
             for (inst, ann) in s.instances.iter().zip(&anns) {
@@ -757,7 +763,7 @@ mod randomize_tests {
                 let m = Rle::from_compressed(counts, 96, 96).unwrap().decode();
                 for (p, &t) in traced.iter().enumerate() {
                     assert!(
-                        !(distractor::is_prop_id(t) && m.data[p] != 0),
+                        !(prop_material::is_prop_id(t) && m.data[p] != 0),
                         "distractor pixel {p} inside the mask of instance {}",
                         inst.id
                     );
@@ -773,7 +779,7 @@ mod randomize_tests {
     fn several_lights_render_finite_values() {
         let mut o = groups("lighting", 64);
         o.ranges.lights = [4, 4];
-        let asset = scene::asset(None).unwrap();
+        let asset = asset::asset(None).unwrap();
         for i in 0..3 {
             let mut rng = image_rng(&o, 3, i);
             let sc = scene::sample(&mut rng, &scene::Streams { seed: 3, index: i }, &o, &asset);

@@ -496,8 +496,8 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
+    use crate::render::asset;
     use crate::render::pile::HeightField;
-    use crate::render::scene;
     use crate::render::skin::{pose_mesh, Pose, PoseRanges};
     use crate::render::{render_sample, RenderOptions};
     use crate::util::hash::{fnv, FNV_OFFSET};
@@ -751,7 +751,7 @@ mod tests {
     #[test]
     fn dense_carcass_piles_settle_stacked_inside_the_fence_with_little_overlap() {
         const W: [f32; 3] = [0.5, 0.3, 0.2];
-        let asset = scene::asset(None).unwrap();
+        let asset = asset::asset(None).unwrap();
         let parts = vertex_parts(&asset.mesh);
         let nparts = parts.iter().collect::<HashSet<_>>().len();
         let t = Instant::now();

@@ -23,11 +23,12 @@ use obvhs::{
 use rayon::prelude::*;
 
 use super::camera::Camera;
-use super::distractor::{PropMaterial, PROP_BASE};
 use super::light::{AreaLight, Environment};
-use super::material::{Background, SkinMaterial, Surface};
+use super::material::{Background, SkinMaterial};
 use super::noise::unit;
+use super::prop_material::{PropMaterial, PROP_BASE};
 use super::screen::{self, PixelOut};
+use super::surface::Surface;
 use crate::util::hash::hash;
 
 /// World-space triangles of all carcasses of one image, with shading attributes.
@@ -41,7 +42,7 @@ pub struct Geometry {
     pub redness: Vec<f32>,
     pub triangles: Vec<[u32; 3]>,
     /// Instance index (0-based) per triangle; distractors from
-    /// [`super::distractor::PROP_BASE`] up.
+    /// [`super::prop_material::PROP_BASE`] up.
     pub tri_instance: Vec<u16>,
 }
 

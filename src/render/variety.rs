@@ -25,11 +25,11 @@ use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::asset::Asset;
 use super::family::Family;
 use super::material::{skin_tone, MarkKind, SkinMark, SkinMaterial};
 use super::mesh::Mesh;
 use super::parts::Parts;
-use super::scene::Asset;
 use super::skin::Pose;
 
 /// An indentation of the skin: rest-space centre on the surface, radius, depth (m).

@@ -166,3 +166,21 @@ impl C2psa {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn c2psa_keeps_shape() {
+        let d = Device::flex();
+        let x = Tensor::<4>::ones([2, 16, 8, 8], &d);
+        assert_eq!(C2psa::new(16, 1, &d).forward(x).dims(), [2, 16, 8, 8]);
+    }
+
+    #[test]
+    #[should_panic(expected = "dim 48 must be a positive multiple of num_heads 5")]
+    fn attention_rejects_bad_heads() {
+        Attention::new(48, 5, &Device::flex());
+    }
+}
