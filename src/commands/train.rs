@@ -7,7 +7,8 @@ use anyhow::Result;
 
 use crate::config::{self, DeviceKind};
 pub use crate::infer::onnx::predict_onnx;
-use crate::infer::predict::predict_checkpoint;
+/// `chicktrain predict --checkpoint X --input IMG_OR_DIR --out DIR`.
+pub use crate::infer::predict::predict_checkpoint as predict_cmd;
 pub use crate::infer::predict::PREDICT_CONF;
 use crate::infer::validate::score_checkpoint;
 pub use crate::infer::validate::SplitName;
@@ -85,17 +86,4 @@ pub fn eval_cmd(
         stats_line("segm", &s.stats.segm),
         s.timing.line()
     ))
-}
-
-/// `chicktrain predict --checkpoint X --input IMG_OR_DIR --out DIR`.
-pub fn predict_cmd(
-    checkpoint: &Path,
-    input: &Path,
-    out_dir: &Path,
-    conf: f32,
-    device: Option<DeviceKind>,
-    imgsz: Option<usize>,
-    augment: bool,
-) -> Result<String> {
-    predict_checkpoint(checkpoint, input, out_dir, conf, device, imgsz, augment)
 }

@@ -62,9 +62,9 @@ pub struct Header {
     pub loss_scale: Option<LossScaleState>,
 }
 
-/// f16 runs: the loss scaler's state as saved. The trainer's `LossScaler` converts from
-/// and to it, so the checkpoint format does not import the training loop; the fields
-/// (and so the header's JSON) are the scaler's.
+/// f16 runs: the dynamic loss scale's state as saved. The trainer's rule that updates it
+/// (`train::loss_scale`, where this type is `LossScaler`) lives with the trainer; the
+/// type lives here so that the checkpoint format does not import the training loop.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LossScaleState {
     pub scale: f32,
@@ -257,13 +257,18 @@ mod tests {
     use crate::model::yolo::{Scale, YoloSegConfig};
     use burn::tensor::{Tensor, TensorData};
 
+    /// A quarter-width YOLO-seg n at 32 px.
+    fn tiny() -> YoloSegConfig {
+        YoloSegConfig::new(Scale::N, 1)
+            .with_input_size(32)
+            .with_width_mult(0.25)
+            .with_num_masks(4)
+    }
+
     #[test]
     fn round_trip_gives_the_same_outputs_and_bad_files_are_named() {
         let dev = Device::flex();
-        let mcfg = YoloSegConfig::new(Scale::N, 1)
-            .with_input_size(32)
-            .with_width_mult(0.25)
-            .with_num_masks(4);
+        let mcfg = tiny();
         let model = mcfg.init(&dev);
         let mcfg = DetectorConfig::Yolo(mcfg);
         let cfg = crate::config::parse(crate::config::SHIPPED[0].1, "q", &[]).unwrap();
@@ -325,12 +330,7 @@ mod tests {
     #[test]
     fn casts_round_trip_and_the_f32_path_is_untouched() {
         // Here rather than beside the casts: module_bytes is the byte-exact comparison.
-        let dev = Device::flex();
-        let m = YoloSegConfig::new(Scale::N, 1)
-            .with_input_size(32)
-            .with_width_mult(0.25)
-            .with_num_masks(4)
-            .init(&dev);
+        let m = tiny().init(&Device::flex());
         assert!(all_in(&m, FloatDType::F32));
         let before = module_bytes(&m).unwrap();
         let same = f32_copy(&m);

@@ -12,9 +12,6 @@
 //! A non-finite loss is not the scaler's business: the divergence guard stops the run.
 
 use anyhow::{bail, Result};
-use serde::{Deserialize, Serialize};
-
-use crate::infer::checkpoint::LossScaleState;
 
 /// Initial and largest scale: the largest power of two f16 holds.
 pub const MAX_SCALE: f32 = 32768.0;
@@ -23,15 +20,10 @@ pub const MIN_SCALE: f32 = 1.0 / 16384.0;
 /// Good steps in a row before the scale doubles (GradScaler's `growth_interval`).
 pub const GROWTH_INTERVAL: u32 = 2000;
 
-/// Scale state; saved in `last.bpk`'s header so `--resume` continues with it.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LossScaler {
-    pub scale: f32,
-    /// Good steps since the last change of scale.
-    pub good_steps: u32,
-    /// Steps skipped over the run.
-    pub skipped: u64,
-}
+/// Scale state: the checkpoint format's [`LossScaleState`] (`last.bpk`'s header stores
+/// it, so `--resume` continues with it, and the format must not import the trainer);
+/// the rule that updates it is here.
+pub use crate::infer::checkpoint::LossScaleState as LossScaler;
 
 impl Default for LossScaler {
     fn default() -> Self {
@@ -39,27 +31,6 @@ impl Default for LossScaler {
             scale: MAX_SCALE,
             good_steps: 0,
             skipped: 0,
-        }
-    }
-}
-
-/// The state a checkpoint saves (`last.bpk`'s header) and `--resume` reads back.
-impl From<LossScaler> for LossScaleState {
-    fn from(s: LossScaler) -> Self {
-        LossScaleState {
-            scale: s.scale,
-            good_steps: s.good_steps,
-            skipped: s.skipped,
-        }
-    }
-}
-
-impl From<LossScaleState> for LossScaler {
-    fn from(s: LossScaleState) -> Self {
-        LossScaler {
-            scale: s.scale,
-            good_steps: s.good_steps,
-            skipped: s.skipped,
         }
     }
 }

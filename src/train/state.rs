@@ -118,12 +118,7 @@ impl TrainState {
             model,
             ema,
             optim,
-            scaler: f16.then(|| {
-                ck.header
-                    .loss_scale
-                    .map(LossScaler::from)
-                    .unwrap_or_default()
-            }),
+            scaler: f16.then(|| ck.header.loss_scale.unwrap_or_default()),
             epoch: ck.header.epoch,
             best_fitness: ck.header.best_fitness,
             best_epoch: run_files::best_epoch(&records),

@@ -181,7 +181,7 @@ impl Run<'_> {
             ema_updates: st.ema.updates,
             best_fitness: st.best_fitness,
             val,
-            loss_scale: st.scaler.map(Into::into),
+            loss_scale: st.scaler,
         }
     }
 
