@@ -1,23 +1,26 @@
 //! chicktrain: render → mix real + synthetic → train → COCO eval → checkpoints, for
 //! instance segmentation of chicken carcasses on a processing line.
 //!
-//! Data flows one way, and the imports say so (a module uses only those listed before
-//! it):
+//! Data flows one way, and the imports say so (a module uses only its own row and those
+//! listed before it, and no two files import each other, even through others;
+//! `tests/architecture.rs` checks both against `docs/architecture.md`):
 //!
 //! | layer | modules |
 //! |---|---|
-//! | foundation | [`util`], [`config`], [`annotations`] (COCO, masks, LabelMe, splits) |
+//! | foundation | [`util`], [`weights`] (PyTorch / safetensors files as host state dicts), [`config`], [`annotations`] (COCO, masks, LabelMe, splits) |
 //! | renderer | [`render`] (writes COCO through `annotations`) |
 //! | loader | [`data`] (real + rendered samples, augmentation, batches, [`data::targets`]) |
-//! | models | [`model`] (YOLO-seg, Mask R-CNN; read `data::targets`) |
+//! | models | [`model`] (YOLO-seg, Mask R-CNN, Mask2Former; read `data::targets`) |
 //! | evaluator | [`eval`] (pycocotools-exact; reads only `annotations`) |
-//! | trainer | [`train`] (loop, checkpoints, run files, per-epoch eval) |
-//! | on top | [`bench`] (timings), [`experiments`] (the paper's sweep), [`commands`] (every CLI command) |
+//! | inference | [`infer`] (the trained-model wrapper, checkpoints, validation, TTA, predict) |
+//! | export | [`export`] (ONNX, safetensors) |
+//! | trainer | [`train`] (loop, optimiser, EMA, run files) |
+//! | on top | [`bench`] (timings, ablations), [`experiments`] (the paper's sweep), [`commands`] (every CLI command) |
 //!
 //! The binary in `main.rs` only parses arguments and calls [`commands`].
 //!
-//! The default `train` feature brings in Burn: [`model`], [`train`], [`bench`],
-//! [`experiments`] and the training side of [`data`]. Without it
+//! The default `train` feature brings in Burn: [`model`], [`infer`], [`export`],
+//! [`train`], [`bench`], [`experiments`] and the training side of [`data`]. Without it
 //! (`default-features = false`) the crate is the annotation layer, renderer and
 //! evaluator, which the fuzz targets in `fuzz/` build.
 
