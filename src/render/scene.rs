@@ -16,7 +16,6 @@ use super::lens::Lens;
 use super::light::{kelvin_to_rgb, AreaLight, Environment};
 use super::line_surface::LineSurface;
 use super::material::{Background, SkinMaterial};
-use super::mesh::Mesh;
 use super::pile::{self, HeightField, RestingMode};
 use super::preset::RenderOptions;
 use super::sensor::Sensor;
