@@ -13,10 +13,12 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::predict::PredictOptions;
 use super::train::{predict_images, PredictClasses};
 use crate::bench::engines::bench_engines;
 use crate::bench::models::parse_sizes;
 use crate::bench::variant::Variant;
+use crate::model::detection::nms_detections;
 use crate::model::maskrcnn::onnx::{
     export_maskrcnn, OnnxMaskRcnn, BOX_INPUT, BOX_OUTPUTS, LEVELS, MASK_INPUT, MASK_OUTPUT,
 };
@@ -27,7 +29,6 @@ use crate::model::yolo::onnx::{export_yolo, ultralytics_output0, OnnxExportOptio
 use crate::model::yolo::postprocess::postprocess_layout;
 use crate::train::checkpoint::Checkpoint;
 use crate::train::detector::Detector;
-use crate::train::evaluate::{VAL_IOU, VAL_MAX_DET};
 use crate::util::tensor::to_host;
 use crate::util::write_atomic;
 
@@ -384,14 +385,13 @@ pub fn predict_onnx(
     onnx: &Path,
     input: &Path,
     out_dir: &Path,
-    conf: f32,
+    opts: &PredictOptions,
     threads: Option<usize>,
-    augment: bool,
 ) -> Result<String> {
     set_threads(threads.unwrap_or_else(all_cores));
     let eng = TractEngine::load(onnx, Some(1))?;
     if eng.metadata("chicktrain_model") == Some("maskrcnn") {
-        return predict_maskrcnn_onnx(eng, input, out_dir, conf, augment);
+        return predict_maskrcnn_onnx(eng, input, out_dir, opts);
     }
     let info = model_info(&eng)?;
     let size = info.size;
@@ -401,8 +401,7 @@ pub fn predict_onnx(
         out_dir,
         size as u32,
         &info.classes,
-        conf,
-        augment,
+        opts,
         &mut |px| {
             let out = eng.run(&[1, 3, size, size], &px)?;
             let (o0, o1) = (&out[0], &out[1]);
@@ -420,7 +419,7 @@ pub fn predict_onnx(
                 (&o1.data, s1),
                 nc,
                 [size, size],
-                (conf, VAL_IOU, VAL_MAX_DET),
+                (opts.conf, opts.iou, opts.max_det),
             )
             .swap_remove(0))
         },
@@ -436,8 +435,7 @@ fn predict_maskrcnn_onnx(
     eng: TractEngine,
     input: &Path,
     out_dir: &Path,
-    conf: f32,
-    augment: bool,
+    opts: &PredictOptions,
 ) -> Result<String> {
     let p = eng.path.clone();
     let pd = p.display();
@@ -481,20 +479,12 @@ fn predict_maskrcnn_onnx(
         category_ids: ids,
         names,
     };
-    let text = predict_images(
-        input,
-        out_dir,
-        size as u32,
-        &classes,
-        conf,
-        augment,
-        &mut |px| {
-            let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &net.device);
-            let mut d = infer(&net, &cfg, x)?.swap_remove(0);
-            d.retain(|x| x.score >= conf);
-            Ok(d)
-        },
-    )?;
+    let text = predict_images(input, out_dir, size as u32, &classes, opts, &mut |px| {
+        let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &net.device);
+        let mut d = infer(&net, &cfg, x)?.swap_remove(0);
+        d.retain(|x| x.score >= opts.conf);
+        Ok(nms_detections(d, opts.iou, opts.max_det))
+    })?;
     Ok(format!(
         "{text} (tract, {} + its two RoI head graphs)",
         p.display()
@@ -505,27 +495,44 @@ fn all_cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
+/// `bench engines` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct EnginesRequest {
+    /// Comma-separated YOLO variants (see `bench models --help`).
+    #[arg(long, default_value = "yolo-n")]
+    pub variants: String,
+    /// Comma-separated input sizes.
+    #[arg(long, default_value = "256,640")]
+    pub sizes: String,
+    /// Timed runs per engine and size; the median is reported.
+    #[arg(long, default_value_t = 10)]
+    pub repeats: usize,
+    /// Untimed runs before the timed ones.
+    #[arg(long, default_value_t = 2)]
+    pub warmup: usize,
+    /// tract threads (default: every core; flex always uses every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Also write each exported file here (<variant>_<size>.onnx).
+    #[arg(long)]
+    pub save_onnx: Option<PathBuf>,
+}
+
 /// `chicktrain bench engines --variants yolo-n --sizes 256,640`: flex vs tract latency.
-pub fn bench_engines_cmd(
-    variants: &str,
-    sizes: &str,
-    warmup: usize,
-    repeats: usize,
-    threads: Option<usize>,
-    save: Option<&Path>,
-) -> Result<String> {
-    let vs = variants
+pub fn bench_engines_cmd(r: &EnginesRequest) -> Result<String> {
+    let vs = r
+        .variants
         .split(',')
         .map(|v| v.trim().parse())
         .collect::<Result<Vec<Variant>>>()?;
-    let sizes = parse_sizes(sizes)?;
+    let sizes = parse_sizes(&r.sizes)?;
     bench_engines(
         &vs,
         &sizes,
-        warmup,
-        repeats,
-        threads.unwrap_or_else(all_cores),
-        save,
+        r.warmup,
+        r.repeats,
+        r.threads.unwrap_or_else(all_cores),
+        r.save_onnx.as_deref(),
     )
 }
 

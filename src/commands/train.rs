@@ -1,37 +1,26 @@
-//! The `train`, `eval` and `predict` commands as library functions returning the text
-//! the binary prints.
+//! The `train` and `predict` commands as library functions returning the text the
+//! binary prints (`eval` is [`super::eval`]; `predict`'s flags are [`super::predict`]).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use burn::tensor::{Tensor, TensorData};
-use image::{Rgb, RgbImage};
+use image::RgbImage;
 use serde_json::json;
 
 use crate::annotations::coco::{save_results, Detection};
 use crate::config::{self, DeviceKind};
 use crate::data::dataset::read_image;
 use crate::data::letterbox::Letterbox;
+use crate::eval::overlay::{draw_box, tint};
 use crate::render::export::instance_color;
 use crate::train::checkpoint::Checkpoint;
 use crate::train::device::device_of;
 pub use crate::train::evaluate::SplitName;
-use crate::train::evaluate::{
-    augmented, fused_to_coco, inference_size, push_planes, score_checkpoint, to_coco,
-};
-use crate::train::run_files::StatsRecord;
+use crate::train::evaluate::{augmented, fused_to_coco, inference_size, push_planes, to_coco};
 use crate::train::trainer::{train, TrainOptions, TrainSummary};
 
-/// Default confidence threshold of `predict` (ultralytics' predict default).
-pub const PREDICT_CONF: f32 = 0.25;
-
-/// One line per COCO stat block, pycocotools names.
-pub fn stats_line(kind: &str, s: &[f64; 12]) -> String {
-    format!(
-        "{kind}: AP {:.4}  AP50 {:.4}  AP75 {:.4}  APs {:.4}  APm {:.4}  APl {:.4}  AR1 {:.4}  AR10 {:.4}  AR100 {:.4}",
-        s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8]
-    )
-}
+use super::predict::{yolo_txt, PredictOptions};
 
 /// `chicktrain train` / `chicktrain --config X`.
 pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -> Result<String> {
@@ -40,7 +29,7 @@ pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -
     let s: TrainSummary = train(cfg, opts)?;
     Ok(format!(
         "trained {} epochs ({} optimiser steps) in {:.1} s ({:.2} train img/s); best epoch {}; run files in {}\n\
-         test split ({} images{}), best.bpk:\n{}\n{}",
+         test split ({} images{}), best.bpk:\n{}",
         s.epochs,
         s.steps,
         s.seconds,
@@ -53,48 +42,7 @@ pub fn train_cmd(config_name: &str, overrides: &[String], opts: &TrainOptions) -
         } else {
             ""
         },
-        stats_line("bbox", &s.test.bbox),
-        stats_line("segm", &s.test.segm)
-    ))
-}
-
-/// `chicktrain eval --checkpoint X [--split val|test] [--data CONFIG] [--imgsz N] [--json]
-/// [--augment]`:
-/// scores the checkpoint's weights (see [`score_checkpoint`]).
-pub fn eval_cmd(
-    checkpoint: &Path,
-    split: SplitName,
-    data: Option<&str>,
-    device: Option<DeviceKind>,
-    imgsz: Option<usize>,
-    json_out: bool,
-    augment: bool,
-) -> Result<String> {
-    let s = score_checkpoint(checkpoint, split, data, device, imgsz, augment)?;
-    if json_out {
-        return Ok(serde_json::to_string(&StatsRecord::from(&s.stats))?);
-    }
-    Ok(format!(
-        "{} (epoch {}) on the {:?} split of {}, {} images at {} px{}{}:\n{}\n{}\n{}",
-        checkpoint.display(),
-        s.epoch,
-        split,
-        s.origin,
-        s.images,
-        s.input,
-        if augment {
-            ", test-time augmentation (8 views)"
-        } else {
-            ""
-        },
-        if s.proxy {
-            " [proxy-real renders, not real photos]"
-        } else {
-            ""
-        },
-        stats_line("bbox", &s.stats.bbox),
-        stats_line("segm", &s.stats.segm),
-        s.timing.line()
+        super::eval::stats_table(&s.test.bbox, &s.test.segm).trim_end()
     ))
 }
 
@@ -121,44 +69,18 @@ fn list_images(input: &Path) -> Result<Vec<PathBuf>> {
     Ok(v)
 }
 
-/// Draws masks (tinted), boxes and a score bar (length ∝ score, above each box; no font
-/// is embedded, the scores are in `results.json`).
+/// Draws masks (tinted), boxes and a score bar (length ∝ score, above each box; the
+/// overlay has no text, the scores are in `results.json`) with [`crate::eval::overlay`].
 fn overlay(img: &RgbImage, dets: &[Detection]) -> Result<RgbImage> {
     let mut out = img.clone();
     let (w, h) = out.dimensions();
     for (k, d) in dets.iter().enumerate() {
         let c = instance_color(k as u16 + 1);
         if let Some(seg) = &d.segmentation {
-            let m = seg.to_rle(h, w)?.decode();
-            for y in 0..h {
-                for x in 0..w {
-                    if m.get(x, y) {
-                        let p = out.get_pixel_mut(x, y);
-                        for i in 0..3 {
-                            p.0[i] = ((p.0[i] as u16 + c[i] as u16) / 2) as u8;
-                        }
-                    }
-                }
-            }
+            tint(&mut out, &seg.to_rle(h, w)?.decode(), c);
         }
-        if let Some([bx, by, bw, bh]) = d.bbox {
-            let (x0, y0) = (bx.max(0.0) as u32, by.max(0.0) as u32);
-            let x1 = ((bx + bw) as u32).min(w.saturating_sub(1));
-            let y1 = ((by + bh) as u32).min(h.saturating_sub(1));
-            for x in x0..=x1 {
-                out.put_pixel(x, y0.min(h - 1), Rgb(c));
-                out.put_pixel(x, y1, Rgb(c));
-            }
-            for y in y0..=y1 {
-                out.put_pixel(x0.min(w - 1), y, Rgb(c));
-                out.put_pixel(x1, y, Rgb(c));
-            }
-            let len = ((x1.saturating_sub(x0)) as f64 * d.score) as u32;
-            for yy in y0.saturating_sub(4)..y0.saturating_sub(1) {
-                for x in x0..(x0 + len).min(w) {
-                    out.put_pixel(x, yy, Rgb(c));
-                }
-            }
+        if let Some(b) = d.bbox {
+            draw_box(&mut out, b, c, Some(d.score));
         }
     }
     Ok(out)
@@ -169,10 +91,9 @@ pub fn predict_cmd(
     checkpoint: &Path,
     input: &Path,
     out_dir: &Path,
-    conf: f32,
+    opts: &PredictOptions,
     device: Option<DeviceKind>,
     imgsz: Option<usize>,
-    augment: bool,
 ) -> Result<String> {
     let ck = Checkpoint::load(checkpoint)?;
     let size = inference_size(ck.header.model.input_size(), imgsz)?;
@@ -184,18 +105,12 @@ pub fn predict_cmd(
         category_ids: ck.header.category_ids.clone(),
         names: ck.header.class_names.clone(),
     };
-    predict_images(
-        input,
-        out_dir,
-        size as u32,
-        &classes,
-        conf,
-        augment,
-        &mut |px| {
-            let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &dev);
-            Ok(model.predict(x, conf).swap_remove(0))
-        },
-    )
+    predict_images(input, out_dir, size as u32, &classes, opts, &mut |px| {
+        let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &dev);
+        Ok(model
+            .predict_nms(x, opts.conf, opts.iou, opts.max_det)
+            .swap_remove(0))
+    })
 }
 
 /// Category ids and names of a model's classes (index = class).
@@ -206,16 +121,17 @@ pub struct PredictClasses {
 
 /// The body of `predict` for any engine: letterboxes each image of `input` to
 /// `size × size`, hands its `[1, 3, size, size]` planes to `infer` (detections with score
-/// > `conf` at the input size), maps them back to the image and writes the overlays,
-/// `results.json` and `images.json` into `out_dir`. With `augment`, every image is seen
-/// in eight views ([`augmented`]) and the fused detections scoring above `conf` are kept.
+/// > `conf` at the input size, after NMS at `iou`, at most `max_det`), maps them back to
+/// the image and writes the overlays, `results.json`, `images.json` and with `save_txt`
+/// `labels/<stem>.txt` into `out_dir`. With `augment`, every image is seen in eight views
+/// ([`augmented`]) and the fused detections scoring above `conf` are kept (at most
+/// `max_det`).
 pub fn predict_images(
     input: &Path,
     out_dir: &Path,
     size: u32,
     classes: &PredictClasses,
-    conf: f32,
-    augment: bool,
+    opts: &PredictOptions,
     infer: &mut dyn FnMut(Vec<f32>) -> Result<Vec<crate::model::detection::Detection>>,
 ) -> Result<String> {
     let files = list_images(input)?;
@@ -227,11 +143,14 @@ pub fn predict_images(
         let img = read_image(f)?;
         let (w, h) = img.dimensions();
         let id = k as u64 + 1;
-        let dets: Vec<Detection> = if augment {
-            augmented(&img, size, infer)
-                .with_context(|| format!("on {}", f.display()))?
+        let dets: Vec<Detection> = if opts.augment {
+            let mut fused =
+                augmented(&img, size, infer).with_context(|| format!("on {}", f.display()))?;
+            fused.retain(|d| d.score > opts.conf);
+            fused.sort_by(|a, b| b.score.total_cmp(&a.score));
+            fused.truncate(opts.max_det);
+            fused
                 .iter()
-                .filter(|d| d.score > conf)
                 .map(|d| fused_to_coco(d, id, &classes.category_ids))
                 .collect()
         } else {
@@ -250,6 +169,13 @@ pub fn predict_images(
             .unwrap_or(format!("{id}"));
         let png = crate::util::png::encode_png(&ov)?;
         crate::util::write_atomic(&out_dir.join(format!("{stem}.png")), &png)?;
+        if opts.save_txt && !dets.is_empty() {
+            let labels = out_dir.join("labels");
+            std::fs::create_dir_all(&labels)
+                .with_context(|| format!("cannot create {}", labels.display()))?;
+            let txt = yolo_txt(&dets, &classes.category_ids, (w, h))?;
+            crate::util::write_atomic(&labels.join(format!("{stem}.txt")), txt.as_bytes())?;
+        }
         images.push(json!({"id": id, "file_name": f.display().to_string(), "width": w, "height": h, "detections": dets.len()}));
         all.extend(dets);
     }
@@ -259,9 +185,11 @@ pub fn predict_images(
         serde_json::to_string_pretty(&json!({"images": images, "categories": classes.category_ids.iter().zip(&classes.names).map(|(i, n)| json!({"id": i, "name": n})).collect::<Vec<_>>()}))?.as_bytes(),
     )?;
     Ok(format!(
-        "{} images, {} detections (score > {conf}); overlays, results.json (COCO results) and images.json (image ids) in {}",
+        "{} images, {} detections (score > {}); overlays, results.json (COCO results){} and images.json (image ids) in {}",
         files.len(),
         all.len(),
+        opts.conf,
+        if opts.save_txt { ", labels/ (YOLO-seg txt)" } else { "" },
         out_dir.display()
     ))
 }

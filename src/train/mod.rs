@@ -7,6 +7,7 @@
 //! other files ([`run_files`]), per-epoch COCO evaluation ([`evaluate`]) and plots
 //! ([`plot`]). The commands built on it live in `commands/`, above it.
 
+pub mod batch_plots;
 pub mod checkpoint;
 pub mod detector;
 pub mod device;
@@ -21,6 +22,8 @@ pub mod optim;
 pub mod plot;
 pub mod precision;
 pub mod run_files;
+pub mod run_folder;
+pub mod run_plots;
 pub mod schedule;
 pub mod smoke;
 pub mod state;
