@@ -11,7 +11,7 @@ fn main() -> anyhow::Result<()> {
     let mut opts = chicktrain::render::RenderOptions::synthetic(size);
     for g in groups.split(',').filter(|g| !g.is_empty() && *g != "none") {
         opts.randomize = if g == "all" {
-            chicktrain::render::randomize::Randomize::ALL
+            chicktrain::config::Randomize::ALL
         } else {
             opts.randomize.with(g, true)?
         };

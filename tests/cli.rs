@@ -47,6 +47,21 @@ fn coco_eval_json_prints_the_12_stats() {
 }
 
 #[test]
+fn bench_help_names_every_bench_subcommand() {
+    let out = run(&["bench", "--help"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    for sub in [
+        "models", "engines", "ablation", "transfer", "render", "loader", "coco",
+    ] {
+        assert!(
+            text.contains(&format!("`bench {sub}`")),
+            "summary omits {sub}: {text}"
+        );
+    }
+}
+
+#[test]
 fn every_subcommand_has_help() {
     for sub in [
         "train",
@@ -392,6 +407,76 @@ fn train_eval_predict_bad_inputs_exit_2_naming_the_file() {
     std::fs::remove_dir_all(&d).unwrap();
 }
 
+/// Issue 39: a second run of a config never overwrites `runs/<name>`: it goes to
+/// `runs/<name>-2`, then `-3`; `--exist-ok` reuses `runs/<name>`; `--resume` continues
+/// the named folder. (The image is missing, so each run stops after claiming its
+/// folder and writing config.toml.)
+#[test]
+fn runs_are_never_overwritten_but_incremented() {
+    let d = tmp("increment");
+    let gt = write(
+        &d,
+        "gt.json",
+        r#"{"images": [{"id": 1, "file_name": "gone.jpg", "width": 64, "height": 64}],
+            "categories": [{"id": 1, "name": "carcass"}], "annotations": []}"#,
+    );
+    let cfg = write(
+        &d,
+        "inc.toml",
+        &format!("name = \"inc\"\n[data]\nreal = {{ kind = \"coco\", annotations = {gt:?} }}\n"),
+    );
+    let in_d = |extra: &[&str]| {
+        let out = bin()
+            .current_dir(&d)
+            .args(["train", "--config", &cfg])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert_clean_error(&out, &[]);
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let runs = d.join("runs");
+    let listing = || {
+        let mut v: Vec<String> = std::fs::read_dir(&runs)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    in_d(&[]);
+    assert_eq!(listing(), ["inc"]);
+    in_d(&[]);
+    in_d(&[]);
+    assert_eq!(listing(), ["inc", "inc-2", "inc-3"]);
+    assert!(runs.join("inc-3/config.toml").is_file());
+    in_d(&["--exist-ok"]);
+    assert_eq!(
+        listing(),
+        ["inc", "inc-2", "inc-3"],
+        "--exist-ok reuses runs/inc"
+    );
+    let e = in_d(&["--resume"]);
+    assert!(
+        e.contains("last.bpk") && e.contains("nothing to resume"),
+        "{e}"
+    );
+    assert!(
+        e.contains(&format!(
+            "runs{}inc{}",
+            std::path::MAIN_SEPARATOR,
+            std::path::MAIN_SEPARATOR
+        )),
+        "{e}"
+    );
+    assert_eq!(
+        listing(),
+        ["inc", "inc-2", "inc-3"],
+        "--resume names runs/inc"
+    );
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
 /// Ctrl-C during training writes last.bpk and exits 2 saying how to resume; --resume
 /// then continues from it.
 #[cfg(unix)]
@@ -455,11 +540,19 @@ fn ctrl_c_saves_last_checkpoint_and_resume_continues() {
         .count();
     let mut a = args(&format!("train.epochs={}", done + 1));
     a.push("--resume".into());
+    a.push("--quiet".into());
     let out = bin().args(&a).output().unwrap();
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
+    );
+    // --quiet: nothing on stderr (no progress, no per-epoch lines), the summary on stdout.
+    assert_eq!(String::from_utf8_lossy(&out.stderr), "");
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("trained") && summary.contains("\nARl "),
+        "{summary}"
     );
     let lines = std::fs::read_to_string(run_dir.join("metrics.jsonl"))
         .unwrap()
@@ -467,5 +560,95 @@ fn ctrl_c_saves_last_checkpoint_and_resume_continues() {
         .count();
     assert_eq!(lines, done + 1);
     assert!(run_dir.join("test.json").is_file());
+    predict_flags_cap_and_save_txt(&run_dir.join("best.bpk"), &d);
     std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// `predict --conf 0 --max-det 1 --save-txt` keeps one detection per image and writes
+/// its polygon as `class x1 y1 … conf`, normalised, with the score of results.json;
+/// `eval --save-json` writes the scored detections.
+fn predict_flags_cap_and_save_txt(best: &Path, d: &Path) {
+    let imgs = d.join("imgs");
+    std::fs::create_dir_all(&imgs).unwrap();
+    let img = image::RgbImage::from_fn(96, 64, |x, y| {
+        image::Rgb([(x * 2) as u8, (y * 3) as u8, 120])
+    });
+    img.save(imgs.join("pic.png")).unwrap();
+    let out = d.join("pred");
+    let o = run(&[
+        "predict",
+        "--checkpoint",
+        best.to_str().unwrap(),
+        "--input",
+        imgs.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--conf",
+        "0",
+        "--iou",
+        "0.5",
+        "--max-det",
+        "1",
+        "--save-txt",
+    ]);
+    common::assert_success(&o);
+    let dets = chicktrain::annotations::coco::load_results(&out.join("results.json")).unwrap();
+    assert_eq!(dets.len(), 1, "--max-det 1 with --conf 0 keeps exactly one");
+    let area = dets[0]
+        .segmentation
+        .as_ref()
+        .unwrap()
+        .to_rle(64, 96)
+        .unwrap()
+        .area();
+    let txt = std::fs::read_to_string(out.join("labels/pic.txt")).unwrap_or_default();
+    if area > 0 {
+        let f: Vec<&str> = txt.split_whitespace().collect();
+        assert_eq!(txt.lines().count(), 1, "{txt}");
+        assert_eq!(f[0], "0");
+        assert!(
+            f.len() >= 8 && f.len() % 2 == 0,
+            "class, ≥ 3 points, conf: {txt}"
+        );
+        let conf: f64 = f[f.len() - 1].parse().unwrap();
+        assert!(
+            (conf - dets[0].score).abs() < 1e-5 * dets[0].score.max(1e-3),
+            "{txt}"
+        );
+        for v in &f[1..f.len() - 1] {
+            let v: f64 = v.parse().unwrap();
+            assert!((0.0..=1.0).contains(&v), "{txt}");
+        }
+    }
+    for (flag, bad) in [("--iou", "7"), ("--conf", "1.5")] {
+        let o = run(&[
+            "predict",
+            "--checkpoint",
+            best.to_str().unwrap(),
+            "--input",
+            imgs.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            flag,
+            bad,
+        ]);
+        assert_clean_error(&o, &[flag, "[0, 1]"]);
+    }
+    let saved = d.join("dets.json");
+    let o = run(&[
+        "eval",
+        "--checkpoint",
+        best.to_str().unwrap(),
+        "--split",
+        "test",
+        "--save-json",
+        saved.to_str().unwrap(),
+    ]);
+    common::assert_success(&o);
+    let text = String::from_utf8_lossy(&o.stdout);
+    let dets = chicktrain::annotations::coco::load_results(&saved).unwrap();
+    assert!(
+        text.contains(&format!("{} detections written to", dets.len())),
+        "{text}"
+    );
 }

@@ -4,7 +4,8 @@
 //! shared scenario, `common::smoke`); the same steps on ndarray; a non-finite loss
 //! stopping with a clean error.
 
-use chicktrain::commands::train::{eval_cmd, SplitName};
+use chicktrain::commands::eval::{eval_cmd, EvalRequest};
+use chicktrain::commands::train::SplitName;
 use chicktrain::config::{self, DeviceKind};
 use chicktrain::infer::checkpoint::Checkpoint;
 use chicktrain::train::run_files::{read_test, StatsRecord};
@@ -12,6 +13,23 @@ use chicktrain::train::trainer::{train, TrainOptions};
 
 mod common;
 use common::smoke::{eval_stats, shipped, smoke_opts, smoke_scenario};
+
+/// `eval --split test` of `best` with these flags.
+fn eval_test(
+    best: &std::path::Path,
+    device: Option<DeviceKind>,
+    imgsz: Option<usize>,
+    json: bool,
+    augment: bool,
+) -> anyhow::Result<String> {
+    eval_cmd(&EvalRequest {
+        device,
+        imgsz,
+        json,
+        augment,
+        ..EvalRequest::new(best, SplitName::Test)
+    })
+}
 
 #[test]
 fn smoke_run_writes_every_file_and_eval_reproduces_it() {
@@ -34,10 +52,8 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     // Checkpoints do not depend on the device: the flex-trained best.bpk scores the same
     // on ndarray (on the CPU backends bit for bit; a GPU backend rounds differently).
     let on_ndarray: StatsRecord = serde_json::from_str(
-        &eval_cmd(
+        &eval_test(
             &r.run.join("best.bpk"),
-            SplitName::Test,
-            None,
             Some(DeviceKind::Ndarray),
             None,
             true,
@@ -54,7 +70,7 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
     // a size the network cannot take is refused before any work, naming the flag.
     let best = r.run.join("best.bpk");
     let trained = Checkpoint::load(&best).unwrap().header.model.input_size();
-    let at = |s: Option<usize>| eval_cmd(&best, SplitName::Test, None, None, s, true, false);
+    let at = |s: Option<usize>| eval_test(&best, None, s, true, false);
     let same: StatsRecord = serde_json::from_str(&at(Some(trained)).unwrap()).unwrap();
     assert_eq!((same.bbox, same.segm), (t.bbox, t.segm));
     let larger: StatsRecord = serde_json::from_str(&at(Some(trained + 32)).unwrap()).unwrap();
@@ -63,25 +79,33 @@ fn smoke_run_writes_every_file_and_eval_reproduces_it() {
         .stats
         .iter()
         .all(|&v| v == -1.0 || (0.0..=1.0).contains(&v)));
-    let text = eval_cmd(
-        &best,
-        SplitName::Test,
-        None,
-        None,
-        Some(trained + 32),
-        false,
-        false,
-    )
-    .unwrap();
+    let text = eval_test(&best, None, Some(trained + 32), false, false).unwrap();
     assert!(text.contains(&format!("at {} px", trained + 32)), "{text}");
+    // The text report is the 12-row table of both IoU types, AP first, ARl last.
+    assert!(text.contains("stat      bbox    segm\nAP "), "{text}");
+    assert!(text.contains("\nARl "), "{text}");
+    // `--save-json`: the scored detections as a COCO results file that scores the same.
+    let saved = r.run.join("eval_dets.json");
+    let json = eval_cmd(&EvalRequest {
+        save_json: Some(saved.clone()),
+        json: true,
+        ..EvalRequest::new(&best, SplitName::Test)
+    })
+    .unwrap();
+    let stats: StatsRecord = serde_json::from_str(&json).unwrap();
+    let dets = chicktrain::annotations::coco::load_results(&saved).unwrap();
+    let split = Checkpoint::load(&best).unwrap().header.split;
+    assert!(dets.iter().all(|d| split.test.contains(&d.image_id)));
+    let real = chicktrain::data::dataset::RealSet::load(&r.resolved.data, r.resolved.seed).unwrap();
+    let gt = chicktrain::infer::validate::gt_subset(&real.gt, &split.test);
+    let again = chicktrain::eval::evaluate(&gt, &dets, chicktrain::eval::IouType::Segm).unwrap();
+    assert_eq!(again.stats, stats.segm.stats);
     // `--augment` (test-time augmentation) scores the same images in eight views: a valid
     // COCO score, and the report says how it was made.
-    let tta = eval_cmd(&best, SplitName::Test, None, None, None, false, true).unwrap();
+    let tta = eval_test(&best, None, None, false, true).unwrap();
     assert!(tta.contains("test-time augmentation (8 views)"), "{tta}");
-    let tta: StatsRecord = serde_json::from_str(
-        &eval_cmd(&best, SplitName::Test, None, None, None, true, true).unwrap(),
-    )
-    .unwrap();
+    let tta: StatsRecord =
+        serde_json::from_str(&eval_test(&best, None, None, true, true).unwrap()).unwrap();
     assert!(tta
         .segm
         .stats

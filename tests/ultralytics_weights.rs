@@ -12,8 +12,9 @@ use chicktrain::model::yolo::ultralytics::{
     apply_all, exported_keys, from_state_dict, read_ultralytics, ultralytics_state_dict,
 };
 use chicktrain::model::yolo::{Scale, YoloSegConfig};
-use chicktrain::util::{safetensors, tensor::to_host};
+use chicktrain::util::tensor::to_host;
 use chicktrain::weights::host::{HostData, HostTensor};
+use chicktrain::weights::safetensors;
 use chicktrain::weights::state_dict::read_state_dict;
 
 fn fixture(name: &str) -> PathBuf {

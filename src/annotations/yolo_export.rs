@@ -35,18 +35,9 @@ pub fn export(ds: &CocoDataset, out: &Path) -> Result<usize> {
                 Segmentation::Polygons(p) => p.clone(),
                 other => mask_to_polygons(&other.to_rle(im.height, im.width)?.decode()),
             };
-            let points: Vec<[f64; 2]> = match polys.len() {
-                0 => continue,
-                1 => pairs(&polys[0]),
-                _ => merge_multi_segment(&polys.iter().map(|p| pairs(p)).collect::<Vec<_>>()),
+            let Some(line) = polygon_line(cls, &polys, (w, h)) else {
+                continue;
             };
-            let mut line = format!("{cls}");
-            for [x, y] in points {
-                line.push(' ');
-                line.push_str(&fmt_g(x / w));
-                line.push(' ');
-                line.push_str(&fmt_g(y / h));
-            }
             if !lines.contains(&line) {
                 lines.push(line);
             }
@@ -71,6 +62,25 @@ pub fn export(ds: &CocoDataset, out: &Path) -> Result<usize> {
     }
     crate::util::write_atomic(&out.join("data.yaml"), yaml.as_bytes())?;
     Ok(written)
+}
+
+/// One YOLO-seg label line, `class x1 y1 x2 y2 …`: the instance's polygons (flat pixel
+/// `[x0, y0, x1, y1, …]`, several joined by [`merge_multi_segment`]) normalised by the
+/// image's `(width, height)` and printed with `%g`. None without a polygon.
+pub fn polygon_line(cls: usize, polys: &[Vec<f64>], (w, h): (f64, f64)) -> Option<String> {
+    let points: Vec<[f64; 2]> = match polys.len() {
+        0 => return None,
+        1 => pairs(&polys[0]),
+        _ => merge_multi_segment(&polys.iter().map(|p| pairs(p)).collect::<Vec<_>>()),
+    };
+    let mut line = format!("{cls}");
+    for [x, y] in points {
+        line.push(' ');
+        line.push_str(&fmt_g(x / w));
+        line.push(' ');
+        line.push_str(&fmt_g(y / h));
+    }
+    Some(line)
 }
 
 fn pairs(p: &[f64]) -> Vec<[f64; 2]> {

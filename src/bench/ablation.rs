@@ -215,6 +215,7 @@ fn train_run(o: &AblationOptions, v: &AblationVariant, cfg: &Config, dir: &Path)
         smoke: false,
         device: Some(o.device),
         quiet: o.quiet,
+        exist_ok: false,
     };
     train(cfg.clone(), &opts)
         .with_context(|| format!("ablation variant {} ({})", v.name, dir.display()))?;

@@ -409,6 +409,7 @@ fn train_run(o: &TransferOptions, cfg: &Config, dir: &Path, which: &str) -> Resu
         smoke: false,
         device: o.device,
         quiet: o.quiet,
+        exist_ok: false,
     };
     train(cfg.clone(), &opts)?;
     Ok(())

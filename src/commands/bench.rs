@@ -2,7 +2,7 @@
 //! `bench model-worker`, and the paper's experiment `sweep`. Defaults that depend on
 //! several flags at once (which grid, which folder) are decided here, not in `main`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::Result;
 
@@ -20,12 +20,21 @@ use crate::config::{self, DeviceKind};
 pub use crate::experiments::sweep::{parse_counts, sweep, SweepOptions};
 use crate::util::all_cores;
 
-/// Per-row effort flags; unset ones keep the base (the defaults, or `--quick`'s).
-#[derive(Clone, Copy, Debug, Default)]
+/// Per-row effort flags of `bench models` / `bench ablation`; unset ones keep the base
+/// (the defaults of [`Effort`], or `--quick`'s).
+#[derive(Clone, Copy, Debug, Default, clap::Args)]
 pub struct EffortFlags {
+    /// Untimed batch-1 runs before the timed ones [default: 3].
+    #[arg(long)]
     pub warmup: Option<usize>,
+    /// Timed batch-1 inference runs; median, p10, p90 reported [default: 30].
+    #[arg(long)]
     pub repeats: Option<usize>,
+    /// Training batch size of the throughput column [default: 8].
+    #[arg(long)]
     pub train_batch: Option<usize>,
+    /// Timed training steps, after one warm-up step [default: 3].
+    #[arg(long)]
     pub train_steps: Option<usize>,
 }
 
@@ -46,18 +55,37 @@ fn this_exe() -> Result<PathBuf> {
 }
 
 /// `bench models` as given on the command line.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct ModelsRequest {
-    /// Comma-separated variants (None: the default grid).
+    /// Comma-separated variants: yolo-n, yolo-s, suffixes -p45 -nopsa -w<f> -m<k>;
+    /// mrcnn-r18/r34/r50/r101, suffix -paper for the detectron2-sized preset;
+    /// m2f-r18/r34/r50/r101 (Mask2Former), suffix -paper for the paper's sizes
+    /// (default: all scene options and compact depths).
+    #[arg(long)]
     pub variants: Option<String>,
-    /// Comma-separated sizes (None: the default sizes).
+    /// Comma-separated input sizes (default 256,320,416,512,640).
+    #[arg(long)]
     pub sizes: Option<String>,
+    /// Trained checkpoints (best.bpk) to score on their test split and time.
+    #[arg(long, num_args = 1..)]
     pub checkpoints: Vec<PathBuf>,
+    /// A couple of minutes: 3 variants, 256 and 320 px, 5 repeats, 1 training step
+    /// (--variants / --sizes still override).
+    #[arg(long)]
     pub quick: bool,
+    /// Report folder name under runs/bench/ (default: models, or quick).
+    #[arg(long)]
     pub name: Option<String>,
+    /// Report folder (overrides --name).
+    #[arg(long)]
     pub out: Option<PathBuf>,
+    #[command(flatten)]
     pub effort: EffortFlags,
+    /// Device of the measurements: flex, ndarray, cuda[:N] or wgpu.
+    #[arg(long, default_value = "flex")]
     pub device: DeviceKind,
+    /// No progress lines, only the report.
+    #[arg(long)]
     pub quiet: bool,
 }
 
@@ -102,18 +130,36 @@ pub fn models(r: ModelsRequest) -> Result<String> {
 }
 
 /// `bench ablation` as given on the command line.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct AblationRequest {
+    /// Base config file, or the name of a shipped config.
+    #[arg(long, default_value = "cpu_protocol.toml")]
     pub config: String,
+    /// Synthetic images added to the real training set of every variant.
+    #[arg(long = "syn", default_value_t = 50)]
     pub synthetic: usize,
+    /// Override a config key in every variant (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
     pub overrides: Vec<String>,
-    /// Comma-separated variant names (None: all).
+    /// Comma-separated subset of: base, no_p3, no_c2psa, width_0.5, protos_16, px192, px320.
+    #[arg(long)]
     pub variants: Option<String>,
+    /// Report folder (default: runs/ablation/<config name>/).
+    #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Only train the missing runs (no timing).
+    #[arg(long)]
     pub train_only: bool,
+    /// Never train: time every variant; AP where a finished run exists.
+    #[arg(long)]
     pub no_train: bool,
+    #[command(flatten)]
     pub effort: EffortFlags,
+    /// Device of training and timing: flex, ndarray, cuda[:N] or wgpu.
+    #[arg(long, default_value = "flex")]
     pub device: DeviceKind,
+    /// No progress bars or per-epoch lines.
+    #[arg(long)]
     pub quiet: bool,
 }
 
@@ -141,17 +187,36 @@ pub fn ablation_cmd(r: AblationRequest) -> Result<String> {
 }
 
 /// `bench transfer` as given on the command line.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct TransferRequest {
+    /// Base config file, or the name of a shipped config.
+    #[arg(long)]
     pub config: String,
+    /// Data config of the set to score on, every image test (e.g.
+    /// bench/crossdomain/crossdomain.toml).
+    #[arg(long)]
     pub data_eval: String,
+    /// Seeds per variant (config seed, seed + 1, …).
+    #[arg(long, default_value_t = 1)]
     pub seeds: usize,
-    /// Comma-separated variant names (None: all).
+    /// Comma-separated subset, e.g. base,no-lighting,no-mosaic (default: all of
+    /// base, no-<group> per randomisation group on, no-<aug> per augmentation on).
+    #[arg(long)]
     pub variants: Option<String>,
+    /// Override a config key in every run (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
     pub overrides: Vec<String>,
+    /// Report folder (default: runs/transfer/<config name>/).
+    #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Never train: score and report the finished runs, name the missing ones.
+    #[arg(long)]
     pub no_train: bool,
+    /// Override the configs' device: flex, ndarray, cuda[:N] or wgpu.
+    #[arg(long)]
     pub device: Option<DeviceKind>,
+    /// No progress bars or per-epoch lines.
+    #[arg(long)]
     pub quiet: bool,
 }
 
@@ -181,47 +246,92 @@ pub fn transfer_cmd(r: TransferRequest) -> Result<String> {
     })
 }
 
+/// `bench loader` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct LoaderRequest {
+    /// Config file, or the name of a shipped config.
+    #[arg(long, default_value = "quickstart.toml")]
+    pub config: String,
+    /// Override a config key (repeatable), e.g. data.fresh_synthetic=true.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+    /// Batches to time (they run on across epochs).
+    #[arg(long, default_value_t = 50)]
+    pub batches: usize,
+    /// Loader threads (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
 /// `chicktrain bench loader`: the report's lines.
-pub fn loader_cmd(
-    config: &str,
-    overrides: &[String],
-    batches: usize,
-    threads: Option<usize>,
-) -> Result<String> {
-    let cfg = config::load(config, overrides)?;
-    Ok(crate::bench::loader::bench_loader(&cfg, batches, threads)?.report(config))
+pub fn loader_cmd(r: &LoaderRequest) -> Result<String> {
+    let cfg = config::load(&r.config, &r.overrides)?;
+    Ok(crate::bench::loader::bench_loader(&cfg, r.batches, r.threads)?.report(&r.config))
+}
+
+/// `bench model-worker` (hidden): the row `bench models` asks a fresh process for.
+#[derive(Clone, Debug, clap::Args)]
+pub struct WorkerRequest {
+    /// The variant of the row (see `bench models --help`).
+    #[arg(long)]
+    pub variant: String,
+    /// The input size of the row.
+    #[arg(long)]
+    pub size: usize,
+    #[command(flatten)]
+    pub effort: EffortFlags,
+    /// Device of the measurement: flex, ndarray, cuda[:N] or wgpu.
+    #[arg(long, default_value = "flex")]
+    pub device: DeviceKind,
 }
 
 /// `chicktrain bench model-worker`: one row, as a JSON line.
-pub fn model_worker(
-    variant: &str,
-    size: usize,
-    effort: EffortFlags,
-    device: DeviceKind,
-) -> Result<String> {
-    worker(variant, size, effort.over(Effort::default()), device)
+pub fn model_worker(r: &WorkerRequest) -> Result<String> {
+    worker(
+        &r.variant,
+        r.size,
+        r.effort.over(Effort::default()),
+        r.device,
+    )
+}
+
+/// `bench engines` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct EnginesRequest {
+    /// Comma-separated YOLO variants (see `bench models --help`).
+    #[arg(long, default_value = "yolo-n")]
+    pub variants: String,
+    /// Comma-separated input sizes.
+    #[arg(long, default_value = "256,640")]
+    pub sizes: String,
+    /// Timed runs per engine and size; the median is reported.
+    #[arg(long, default_value_t = 10)]
+    pub repeats: usize,
+    /// Untimed runs before the timed ones.
+    #[arg(long, default_value_t = 2)]
+    pub warmup: usize,
+    /// tract threads (default: every core; flex always uses every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Also write each exported file here (<variant>_<size>.onnx).
+    #[arg(long)]
+    pub save_onnx: Option<PathBuf>,
 }
 
 /// `chicktrain bench engines --variants yolo-n --sizes 256,640`: flex vs tract latency.
-pub fn bench_engines_cmd(
-    variants: &str,
-    sizes: &str,
-    warmup: usize,
-    repeats: usize,
-    threads: Option<usize>,
-    save: Option<&Path>,
-) -> Result<String> {
-    let vs = variants
+pub fn bench_engines_cmd(r: &EnginesRequest) -> Result<String> {
+    let vs = r
+        .variants
         .split(',')
         .map(|v| v.trim().parse())
         .collect::<Result<Vec<Variant>>>()?;
-    let sizes = parse_sizes(sizes)?;
+    let sizes = parse_sizes(&r.sizes)?;
     bench_engines(
         &vs,
         &sizes,
-        warmup,
-        repeats,
-        threads.unwrap_or_else(all_cores),
-        save,
+        r.warmup,
+        r.repeats,
+        r.threads.unwrap_or_else(all_cores),
+        r.save_onnx.as_deref(),
     )
 }

@@ -1,7 +1,7 @@
 //! The data commands: `render`, `convert`, `coco-eval`, `bench coco`, `bench render`
 //! (none needs Burn).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -11,22 +11,53 @@ use crate::annotations::{labelme, yolo_export};
 use crate::config::Randomize;
 use crate::eval::{evaluate, IouType};
 
+/// `coco-eval` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct CocoEvalRequest {
+    /// Ground-truth COCO instances file.
+    #[arg(long)]
+    pub gt: PathBuf,
+    /// Detections (COCO results JSON: a list of detections).
+    #[arg(long)]
+    pub dt: PathBuf,
+    /// bbox or segm.
+    #[arg(long, default_value = "segm")]
+    pub iou_type: IouType,
+    /// Print one JSON object with "stats" (the 12 numbers in pycocotools order).
+    #[arg(long)]
+    pub json: bool,
+}
+
 /// `chicktrain coco-eval`: the pycocotools summary (or one JSON object) for a GT/DT pair.
-pub fn coco_eval(gt: &Path, dt: &Path, iou_type: IouType, json: bool) -> Result<String> {
-    let gt = CocoDataset::load(gt)?;
-    let dets = load_results(dt)?;
-    let res =
-        evaluate(&gt, &dets, iou_type).with_context(|| format!("evaluating {}", dt.display()))?;
-    Ok(if json {
+pub fn coco_eval(r: &CocoEvalRequest) -> Result<String> {
+    let gt = CocoDataset::load(&r.gt)?;
+    let dets = load_results(&r.dt)?;
+    let res = evaluate(&gt, &dets, r.iou_type)
+        .with_context(|| format!("evaluating {}", r.dt.display()))?;
+    Ok(if r.json {
         res.to_json().to_string()
     } else {
         res.summary()
     })
 }
 
+/// `convert labelme` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct LabelmeRequest {
+    /// Folder of LabelMe .json files (with their images beside them).
+    pub dir: PathBuf,
+    /// The COCO instances file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// labelme's labels.txt (one label per line) to fix the category order.
+    #[arg(long)]
+    pub labels: Option<PathBuf>,
+}
+
 /// `chicktrain convert labelme DIR --out coco.json`.
-pub fn convert_labelme(dir: &Path, labels: Option<&Path>, out: &Path) -> Result<String> {
-    let labels = labels.map(labelme::read_labels).transpose()?;
+pub fn convert_labelme(r: &LabelmeRequest) -> Result<String> {
+    let (dir, out) = (&r.dir, &r.out);
+    let labels = r.labels.as_deref().map(labelme::read_labels).transpose()?;
     let ds = labelme::load_dir(dir, labels.as_deref())?;
     ds.save(out)?;
     Ok(format!(
@@ -39,9 +70,20 @@ pub fn convert_labelme(dir: &Path, labels: Option<&Path>, out: &Path) -> Result<
     ))
 }
 
+/// `convert coco2yolo` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct Coco2yoloRequest {
+    /// The COCO instances file to convert.
+    pub coco: PathBuf,
+    /// Output folder: labels/<image stem>.txt and data.yaml are written here.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
 /// `chicktrain convert coco2yolo coco.json --out DIR`.
-pub fn convert_coco2yolo(coco: &Path, out: &Path) -> Result<String> {
-    let ds = CocoDataset::load(coco)?;
+pub fn convert_coco2yolo(r: &Coco2yoloRequest) -> Result<String> {
+    let out = &r.out;
+    let ds = CocoDataset::load(&r.coco)?;
     let n = yolo_export::export(&ds, out)?;
     Ok(format!(
         "wrote {n} label files under {} and {}",
@@ -50,8 +92,23 @@ pub fn convert_coco2yolo(coco: &Path, out: &Path) -> Result<String> {
     ))
 }
 
+/// `bench coco` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct BenchCocoRequest {
+    /// Ground-truth COCO instances file.
+    #[arg(long)]
+    pub gt: PathBuf,
+    /// Detections (COCO results JSON).
+    #[arg(long)]
+    pub dt: PathBuf,
+    /// Timed runs per IoU type; the median is reported.
+    #[arg(long, default_value_t = 21)]
+    pub repeats: usize,
+}
+
 /// `chicktrain bench coco`: load + evaluate + accumulate time, median of `repeats`.
-pub fn bench_coco(gt: &Path, dt: &Path, repeats: usize) -> Result<String> {
+pub fn bench_coco(r: &BenchCocoRequest) -> Result<String> {
+    let (gt, dt, repeats) = (&r.gt, &r.dt, r.repeats);
     let mut out = String::new();
     for iou_type in [IouType::Bbox, IouType::Segm] {
         let mut times = Vec::with_capacity(repeats);
@@ -95,20 +152,47 @@ pub fn parse_randomize(list: &str) -> Result<Randomize> {
     Randomize::parse_list(list).context("--randomize")
 }
 
+/// The scene flags `render` and `bench render` share.
+#[derive(Clone, Debug, clap::Args)]
+pub struct SceneFlags {
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 640)]
+    pub size: u32,
+    /// `synthetic` (training renders) or `proxy-real` (the stand-in for real photos).
+    #[arg(long, default_value = "synthetic")]
+    pub preset: String,
+    /// Seed of the scenes (image k is drawn from (seed, k)).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Domain-randomisation groups to switch on: a comma list of carcass, scene,
+    /// distractors, lighting, camera, physics, or `all` / `none`.
+    #[arg(long, default_value = "none")]
+    pub randomize: String,
+}
+
+/// `render` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct RenderRequest {
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Number of images.
+    #[arg(long, default_value_t = 16)]
+    pub count: u32,
+    /// A carcass mesh (.glb, skinned or rigid) instead of the embedded one.
+    #[arg(long)]
+    pub carcass: Option<PathBuf>,
+    #[command(flatten)]
+    pub scene: SceneFlags,
+}
+
 /// `chicktrain render`: a rendered, auto-labelled dataset with a preview sheet.
-pub fn render(
-    out: &Path,
-    count: u32,
-    seed: u64,
-    size: u32,
-    preset: &str,
-    carcass: Option<PathBuf>,
-    randomize: &str,
-) -> Result<String> {
-    let mut opts = preset_with(preset, size, randomize)?;
+pub fn render(r: &RenderRequest) -> Result<String> {
+    let (out, count, preset) = (&r.out, r.count, &r.scene.preset);
+    let mut opts = preset_with(preset, r.scene.size, &r.scene.randomize)?;
     opts.count = count;
-    opts.seed = seed;
-    opts.carcass = carcass;
+    opts.seed = r.scene.seed;
+    opts.carcass = r.carcass.clone();
     crate::render::render_dataset(&opts, out, true)?;
     let proxy = if opts.is_proxy() {
         " (proxy-real: a rendered stand-in for real photos, not real data)"
@@ -121,16 +205,21 @@ pub fn render(
     ))
 }
 
+/// `bench render` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct BenchRenderRequest {
+    /// Images to render and time.
+    #[arg(long, default_value_t = 12)]
+    pub images: usize,
+    #[command(flatten)]
+    pub scene: SceneFlags,
+}
+
 /// `chicktrain bench render`.
-pub fn bench_render(
-    size: u32,
-    images: usize,
-    preset: &str,
-    seed: u64,
-    randomize: &str,
-) -> Result<String> {
-    let opts = preset_with(preset, size, randomize)?;
-    Ok(crate::render::bench_render(&opts, images, seed)?.to_string())
+pub fn bench_render(r: &BenchRenderRequest) -> Result<String> {
+    let s = &r.scene;
+    let opts = preset_with(&s.preset, s.size, &s.randomize)?;
+    Ok(crate::render::bench_render(&opts, r.images, s.seed)?.to_string())
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@ use crate::export::onnx::{export_onnx, OnnxExport};
 use crate::infer::checkpoint::Checkpoint;
 
 /// The formats `export` writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ExportFormat {
     /// The inference graph: ultralytics' ONNX layout (YOLO-seg), or Mask R-CNN's
     /// backbone + RPN head, box head and mask head graphs.
@@ -30,18 +30,27 @@ impl ExportFormat {
 }
 
 /// What `export` was asked for.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct ExportRequest {
+    /// A best.bpk / last.bpk written by `train`.
+    #[arg(long)]
     pub checkpoint: PathBuf,
+    /// onnx or safetensors.
+    #[arg(long, value_enum)]
     pub format: ExportFormat,
-    /// Default: the checkpoint's path with the format's extension (`best.bpk` →
-    /// `best.onnx`), as ultralytics writes `best.onnx` beside `best.pt`.
+    /// Output file (default: the checkpoint's path with .onnx / .safetensors, as
+    /// ultralytics writes `best.onnx` beside `best.pt`).
+    #[arg(long)]
     pub out: Option<PathBuf>,
-    /// ONNX: batch size of the graph (and of the reference input).
+    /// ONNX: batch size of a static graph (and of the reference input).
+    #[arg(long, default_value_t = 1)]
     pub batch: usize,
-    /// ONNX: symbolic batch dimension.
+    /// ONNX: a symbolic batch dimension instead of a fixed one.
+    #[arg(long)]
     pub dynamic: bool,
-    /// ONNX: also write `<out>.reference.safetensors` (input + chicktrain's outputs).
+    /// ONNX: also write <out>.reference.safetensors (a seeded input and chicktrain's
+    /// outputs for it; `bench/onnx_check.py` compares ONNX Runtime against them).
+    #[arg(long)]
     pub reference: bool,
 }
 

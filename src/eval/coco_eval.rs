@@ -117,6 +117,25 @@ pub struct CocoEvalResult {
     pub precision: Vec<f64>,
     /// `[T][K][A][M]`, flattened in C order.
     pub recall: Vec<f64>,
+    /// pycocotools' `eval['scores']`: the score of the detection at which each recall
+    /// threshold is read, `[T][R][K][A][M]` like `precision` (0 past the last one).
+    pub scores: Vec<f64>,
+    /// Per category (index of `cat_ids`), at IoU 0.5, all areas, 100 detections: every
+    /// ranked detection's score with the recall and raw precision after it (the points the
+    /// interpolated `precision` is read from; the confidence curves of a run are drawn
+    /// from them). None where pycocotools skips the category (no evaluated image or GT).
+    pub ranked: Vec<Option<RankedPr>>,
+}
+
+/// Score, recall and raw (not interpolated) precision after each ranked detection of a
+/// category: what `accumulate` computes before the 101-point interpolation.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RankedPr {
+    pub scores: Vec<f64>,
+    pub recall: Vec<f64>,
+    pub precision: Vec<f64>,
+    /// Unignored ground-truth instances of the category.
+    pub num_gt: usize,
 }
 
 /// The detections as `loadRes` turns them into annotations.
@@ -181,15 +200,17 @@ pub fn evaluate(gt: &CocoDataset, dets: &[Detection], iou_type: IouType) -> Resu
     let ious = compute_ious(&gts, &mut dts, max_det);
     let evals = evaluate_imgs(&index, &gts, &dts, &ious, max_det, &iou_thrs);
     let (ni, nk) = (index.img_ids.len(), index.cat_ids.len());
-    let (precision, recall) = accumulate(&evals, ni, nk, &iou_thrs, &rec_thrs);
+    let acc = accumulate(&evals, ni, nk, &iou_thrs, &rec_thrs);
     let mut result = CocoEvalResult {
         iou_type,
         stats: [0.0; 12],
         iou_thrs,
         rec_thrs,
         cat_ids: index.cat_ids,
-        precision,
-        recall,
+        precision: acc.precision,
+        recall: acc.recall,
+        scores: acc.scores,
+        ranked: acc.ranked,
     };
     result.stats = STAT_ROWS.map(|(ap, thr, area, md)| result.summarize(ap, thr, area, md));
     Ok(result)
@@ -393,15 +414,24 @@ fn evaluate_imgs(
     evals
 }
 
-/// `accumulate`: precision `[T][R][K][A][M]` and recall `[T][K][A][M]` (C order), −1
-/// where a category × area range × maxDets has no evaluated image or no unignored GT.
+/// What `accumulate` returns (see the fields of [`CocoEvalResult`]).
+struct Accumulated {
+    precision: Vec<f64>,
+    recall: Vec<f64>,
+    scores: Vec<f64>,
+    ranked: Vec<Option<RankedPr>>,
+}
+
+/// `accumulate`: precision and scores `[T][R][K][A][M]` and recall `[T][K][A][M]` (C
+/// order), −1 where a category × area range × maxDets has no evaluated image or no
+/// unignored GT; and the ranked points of each category at IoU 0.5, all areas, 100.
 fn accumulate(
     evals: &[Option<ImgEval>],
     ni: usize,
     nk: usize,
     iou_thrs: &[f64],
     rec_thrs: &[f64],
-) -> (Vec<f64>, Vec<f64>) {
+) -> Accumulated {
     let (nt, nr, na, nm) = (
         iou_thrs.len(),
         rec_thrs.len(),
@@ -410,6 +440,8 @@ fn accumulate(
     );
     let mut precision = vec![-1.0; nt * nr * nk * na * nm];
     let mut recall = vec![-1.0; nt * nk * na * nm];
+    let mut scores = vec![-1.0; nt * nr * nk * na * nm];
+    let mut ranked_pr = vec![None; nk];
     for k in 0..nk {
         for a in 0..na {
             for (m, &md) in MAX_DETS.iter().enumerate() {
@@ -419,17 +451,33 @@ fn accumulate(
                 let Some(ranked) = RankedDets::new(&es, md) else {
                     continue;
                 };
+                let ss = ranked.sorted_scores();
                 for t in 0..nt {
                     let (rc, pr) = ranked.pr_curve(t);
                     recall[((t * nk + k) * na + a) * nm + m] = rc.last().copied().unwrap_or(0.0);
-                    for (r, q) in interpolate_precision(&rc, pr, rec_thrs).enumerate() {
-                        precision[(((t * nr + r) * nk + k) * na + a) * nm + m] = q;
+                    if t == 0 && a == 0 && m == nm - 1 {
+                        ranked_pr[k] = Some(RankedPr {
+                            scores: ss.clone(),
+                            recall: rc.clone(),
+                            precision: pr.clone(),
+                            num_gt: ranked.npig,
+                        });
+                    }
+                    for (r, (q, j)) in interpolate_precision(&rc, pr, rec_thrs).enumerate() {
+                        let at = (((t * nr + r) * nk + k) * na + a) * nm + m;
+                        precision[at] = q;
+                        scores[at] = j.map_or(0.0, |j| ss[j]);
                     }
                 }
             }
         }
     }
-    (precision, recall)
+    Accumulated {
+        precision,
+        recall,
+        scores,
+        ranked: ranked_pr,
+    }
 }
 
 /// One category × area range × maxDets in `accumulate`: every image's top-`md`
@@ -475,6 +523,17 @@ impl<'a> RankedDets<'a> {
         })
     }
 
+    /// The scores of the ranked detections, high first (pycocotools' `dtScoresSorted`).
+    fn sorted_scores(&self) -> Vec<f64> {
+        self.order
+            .iter()
+            .map(|&o| {
+                let (e_i, d) = self.owner[o];
+                self.es[e_i].scores[d]
+            })
+            .collect()
+    }
+
     /// Recall and raw precision after each ranked detection at IoU threshold `t`
     /// (cumulative TP/FP over the unignored detections, `np.spacing(1)` in the divisor).
     fn pr_curve(&self, t: usize) -> (Vec<f64>, Vec<f64>) {
@@ -501,12 +560,13 @@ impl<'a> RankedDets<'a> {
 }
 
 /// The 101-point interpolated precision: `pr` made non-increasing from the right, then
-/// read at the first detection whose recall reaches each threshold (0 past the end).
+/// read at the first detection whose recall reaches each threshold (0 past the end), with
+/// the index of that detection (None past the end).
 fn interpolate_precision<'a>(
     rc: &'a [f64],
     mut pr: Vec<f64>,
     rec_thrs: &'a [f64],
-) -> impl Iterator<Item = f64> + 'a {
+) -> impl Iterator<Item = (f64, Option<usize>)> + 'a {
     let nd = rc.len();
     for j in (1..nd).rev() {
         if pr[j] > pr[j - 1] {
@@ -519,9 +579,9 @@ fn interpolate_precision<'a>(
             j += 1;
         }
         if j < nd {
-            pr[j]
+            (pr[j], Some(j))
         } else {
-            0.0
+            (0.0, None)
         }
     })
 }

@@ -19,7 +19,7 @@ use plotters::style::FontStyle;
 /// `assets/fonts/LICENSE.txt`). Use even pixel sizes only: plotters' ab_glyph backend
 /// places each glyph at `size / 2` truncated, which lifts a '.' at odd sizes.
 static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans-subset.ttf");
-const FAMILY: &str = "sans-serif";
+pub(crate) const FAMILY: &str = "sans-serif";
 
 /// A palette that stays distinguishable on white (Tableau 10).
 pub const PALETTE: [RGBColor; 10] = [
@@ -44,6 +44,8 @@ pub enum Mark {
     Points,
     /// Dashed-looking thin polyline without dots (e.g. a Pareto front under the points).
     Front,
+    /// Thick polyline without dots, for dense curves (precision-recall, F1-confidence).
+    Curve,
 }
 
 /// One labelled series of a panel.
@@ -120,7 +122,7 @@ impl Panel {
     }
 }
 
-fn register_font() {
+pub(crate) fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         // The bytes are a valid TrueType file checked in with the source; a failure here
@@ -215,6 +217,9 @@ where
                 .map_err(err)?,
             Mark::Front => chart
                 .draw_series(LineSeries::new(pts.clone(), c.mix(0.6).stroke_width(1)))
+                .map_err(err)?,
+            Mark::Curve => chart
+                .draw_series(LineSeries::new(pts.clone(), c.stroke_width(3)))
                 .map_err(err)?,
             Mark::Points => chart
                 .draw_series(pts.iter().map(|&q| Circle::new(q, 4, c.filled())))

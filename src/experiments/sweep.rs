@@ -28,25 +28,44 @@ use crate::train::smoke::smoke_config;
 use crate::train::trainer::{train, TrainOptions};
 use crate::util::stats::mean_std;
 
-/// What to sweep.
-#[derive(Clone, Debug)]
+/// What to sweep (`chicktrain sweep`'s flags).
+#[derive(Clone, Debug, clap::Args)]
 pub struct SweepOptions {
-    /// Config file or shipped config name.
+    /// Config file or shipped config name (e.g. yolo_real_baseline.toml).
+    #[arg(long)]
     pub config: String,
-    /// Synthetic-image counts (`data.synthetic`), one row each.
-    pub synthetic: Vec<usize>,
-    /// Seeds per count: `seed`, `seed + 1`, ….
+    /// Synthetic-image counts (`data.synthetic`), comma-separated, one row each.
+    // The full path keeps clap from reading the Vec as a repeated flag.
+    #[arg(long = "syn", value_name = "COUNTS", default_value = "0,250,500,750,1000", value_parser = counts_flag)]
+    pub synthetic: ::std::vec::Vec<usize>,
+    /// Seeds per count (config seed, seed + 1, …).
+    #[arg(long, default_value_t = 1)]
     pub seeds: usize,
-    /// `--set` overrides applied to every run (before the sweep's own two).
+    /// Override a config key in every run, e.g. --set train.epochs=20 (repeatable;
+    /// applied before the sweep's own two).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
     pub overrides: Vec<String>,
-    /// Every run shrunk to a ~1 minute smoke run.
+    /// Shrink every run to a ~1 minute smoke run.
+    #[arg(long)]
     pub smoke: bool,
+    /// Write the runs and the report here instead of runs/sweep/<name>/.
+    #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Train nothing: report the runs that finished, name the missing ones.
+    /// Train nothing: report the finished runs in the output folder and name the
+    /// missing ones (for a sweep split over several processes or cut short).
+    #[arg(long)]
     pub no_train: bool,
+    /// Override the config's device: flex, ndarray, cuda[:N] or wgpu.
+    #[arg(long)]
     pub device: Option<DeviceKind>,
     /// No progress bars or per-epoch lines.
+    #[arg(long)]
     pub quiet: bool,
+}
+
+/// [`parse_counts`] as clap's value parser of `--syn`.
+fn counts_flag(s: &str) -> std::result::Result<Vec<usize>, String> {
+    parse_counts(s).map_err(|e| format!("{e:#}"))
 }
 
 /// Test metrics of one finished run.
@@ -328,6 +347,7 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
                 smoke: o.smoke,
                 device: o.device,
                 quiet: o.quiet,
+                exist_ok: false,
             };
             train(cfg, &opts).with_context(|| {
                 format!("sweep run {n} synthetic, seed {seed} ({})", dir.display())

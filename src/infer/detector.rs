@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{Config, ModelConfig, ModelKind};
 use crate::data::targets::Targets;
-use crate::model::detection::Detection;
+use crate::model::detection::{nms_detections, Detection};
 use crate::model::mask2former::{Mask2Former, Mask2FormerConfig, Mask2FormerLosses};
 use crate::model::maskrcnn::{MaskRcnn, MaskRcnnConfig, MaskRcnnLosses};
 use crate::model::summary::ModelSummary;
@@ -220,6 +220,26 @@ impl Detector {
     /// Mask R-CNN applies its own score threshold (`roi.score_thresh`, 0.05) first.
     pub fn predict(&self, images: Tensor<4>, conf: f32) -> Vec<Vec<Detection>> {
         self.predict_timed(images, conf).0
+    }
+
+    /// [`Self::predict`] with the NMS IoU and detection cap of `predict --iou --max-det`:
+    /// YOLO's postprocess runs at them; Mask R-CNN's and Mask2Former's detections (their
+    /// own NMS already applied) go through [`nms_detections`] at them.
+    pub fn predict_nms(
+        &self,
+        images: Tensor<4>,
+        conf: f32,
+        iou: f32,
+        max_det: usize,
+    ) -> Vec<Vec<Detection>> {
+        match self {
+            Detector::Yolo(m) => postprocess(&m.forward(images), conf, iou, max_det),
+            _ => self
+                .predict(images, conf)
+                .into_iter()
+                .map(|d| nms_detections(d, iou, max_det))
+                .collect(),
+        }
     }
 
     /// [`Self::predict`] and the seconds of the network alone: YOLO's forward pass up to

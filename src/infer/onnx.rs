@@ -14,8 +14,8 @@ use crate::model::onnx::engine::{set_threads, TractEngine};
 use crate::model::yolo::postprocess::postprocess_layout;
 use crate::util::all_cores;
 
-use super::detector::{VAL_IOU, VAL_MAX_DET};
-use super::predict::{predict_images, PredictClasses};
+use super::predict::{predict_images, PredictClasses, PredictOptions};
+use crate::model::detection::nms_detections;
 
 /// What `predict --onnx` needs to know about an exported file, read from it.
 struct OnnxModelInfo {
@@ -126,14 +126,13 @@ pub fn predict_onnx(
     onnx: &Path,
     input: &Path,
     out_dir: &Path,
-    conf: f32,
+    opts: &PredictOptions,
     threads: Option<usize>,
-    augment: bool,
 ) -> Result<String> {
     set_threads(threads.unwrap_or_else(all_cores));
     let eng = TractEngine::load(onnx, Some(1))?;
     if eng.metadata("chicktrain_model") == Some("maskrcnn") {
-        return predict_maskrcnn_onnx(eng, input, out_dir, conf, augment);
+        return predict_maskrcnn_onnx(eng, input, out_dir, opts);
     }
     let info = model_info(&eng)?;
     let size = info.size;
@@ -143,8 +142,7 @@ pub fn predict_onnx(
         out_dir,
         size as u32,
         &info.classes,
-        conf,
-        augment,
+        opts,
         &mut |px| {
             let out = eng.run(&[1, 3, size, size], &px)?;
             let (o0, o1) = (&out[0], &out[1]);
@@ -162,7 +160,7 @@ pub fn predict_onnx(
                 (&o1.data, s1),
                 nc,
                 [size, size],
-                (conf, VAL_IOU, VAL_MAX_DET),
+                (opts.conf, opts.iou, opts.max_det),
             )
             .swap_remove(0))
         },
@@ -178,8 +176,7 @@ fn predict_maskrcnn_onnx(
     eng: TractEngine,
     input: &Path,
     out_dir: &Path,
-    conf: f32,
-    augment: bool,
+    opts: &PredictOptions,
 ) -> Result<String> {
     let p = eng.path.clone();
     let pd = p.display();
@@ -223,20 +220,12 @@ fn predict_maskrcnn_onnx(
         category_ids: ids,
         names,
     };
-    let text = predict_images(
-        input,
-        out_dir,
-        size as u32,
-        &classes,
-        conf,
-        augment,
-        &mut |px| {
-            let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &net.device);
-            let mut d = infer(&net, &cfg, x)?.swap_remove(0);
-            d.retain(|x| x.score >= conf);
-            Ok(d)
-        },
-    )?;
+    let text = predict_images(input, out_dir, size as u32, &classes, opts, &mut |px| {
+        let x = Tensor::<4>::from_data(TensorData::new(px, [1, 3, size, size]), &net.device);
+        let mut d = infer(&net, &cfg, x)?.swap_remove(0);
+        d.retain(|x| x.score >= opts.conf);
+        Ok(nms_detections(d, opts.iou, opts.max_det))
+    })?;
     Ok(format!(
         "{text} (tract, {} + its two RoI head graphs)",
         p.display()

@@ -371,6 +371,8 @@ pub struct Score {
     /// Where the images came from, for messages.
     pub origin: String,
     pub timing: EvalTiming,
+    /// The scored detections (COCO results, the real set's image ids).
+    pub detections: Vec<Detection>,
 }
 
 /// The square size images are letterboxed to for inference: the checkpoint's training
@@ -444,6 +446,7 @@ pub fn score_checkpoint(
     Ok(Score {
         stats: ev.stats,
         timing: ev.timing,
+        detections: ev.detections,
         input,
         epoch: ck.header.epoch,
         images: ids.len(),

@@ -92,3 +92,13 @@ pub fn nms(cands: &[([f32; 4], f32, usize)], iou: f32, max_det: usize) -> Vec<us
     }
     keep
 }
+
+/// [`nms`] over finished detections (class-wise, at `iou`, at most `max_det`), highest
+/// score first: `predict --iou --max-det` for the families whose own postprocess does not
+/// take them (Mask R-CNN and Mask2Former run their own NMS first, at their config's IoU).
+pub fn nms_detections(dets: Vec<Detection>, iou: f32, max_det: usize) -> Vec<Detection> {
+    let cands: Vec<_> = dets.iter().map(|d| (d.xyxy(), d.score, d.class)).collect();
+    let keep = nms(&cands, iou, max_det);
+    let mut slots: Vec<Option<Detection>> = dets.into_iter().map(Some).collect();
+    keep.into_iter().filter_map(|i| slots[i].take()).collect()
+}

@@ -8,6 +8,7 @@
 //! model never imports the training loop. The commands built on it live in `commands/`,
 //! above it.
 
+pub mod batch_plots;
 pub mod divergence;
 pub mod ema;
 pub mod init;
@@ -17,6 +18,8 @@ pub mod loss_scale;
 pub mod optim;
 pub mod plot;
 pub mod run_files;
+pub mod run_folder;
+pub mod run_plots;
 pub mod schedule;
 pub mod smoke;
 pub mod state;

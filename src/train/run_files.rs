@@ -3,6 +3,10 @@
 //! ([`TestRecord`]) and the resolved `config.toml`. The trainer writes them; `plot`,
 //! `sweep`, `bench models` and `--resume` read them back through these types.
 //!
+//! The folder itself is chosen by [`super::run_folder`] (never overwritten: `-2`, `-3`,
+//! …); its images are written by [`super::plot`] (`plots.png`), [`super::run_plots`]
+//! (PR and F1 curves, confusion matrix) and [`super::batch_plots`] (batch mosaics).
+//!
 //! Field order is the files' key order (alphabetical, as the untyped `serde_json` maps
 //! that wrote them before these types existed), so files stay byte-identical.
 

@@ -24,6 +24,7 @@ use crate::data::dataset::{RealSet, SyntheticSet};
 use super::divergence::{check_weights, At, DivergenceGuard};
 use super::loader::{epoch_batches, mix, Loader, Mix};
 use super::run_files::{self, EpochRecord, StatsRecord, TestRecord, ValTime};
+use super::run_folder::run_folder;
 use super::schedule::step_lr;
 use super::smoke::smoke_config;
 use super::state::TrainState;
@@ -32,22 +33,32 @@ use crate::infer::checkpoint::{module_bytes, Checkpoint, Header, Stats, FORMAT};
 use crate::infer::detector::DetectorConfig;
 use crate::infer::device::device_with;
 use crate::infer::precision::{copy_in, float_dtype, graph_cast};
-use crate::infer::validate::{evaluate_ids, InputCache};
+use crate::infer::validate::{evaluate_ids, gt_subset, InputCache};
 use crate::util::progress;
 
-/// How to run (everything that is not in the config file).
-#[derive(Clone, Debug, Default)]
+/// How to run (everything that is not in the config file): `train`'s flags.
+#[derive(Clone, Debug, Default, clap::Args)]
 pub struct TrainOptions {
-    /// Outputs here instead of `runs/<name>/`.
+    /// Write outputs here instead of runs/<name>/.
+    #[arg(long)]
     pub run_dir: Option<PathBuf>,
-    /// Continue from `<run_dir>/last.bpk`.
+    /// Continue the run from <run dir>/last.bpk.
+    #[arg(long)]
     pub resume: bool,
-    /// Shrink the config to a ~1 minute run ([`smoke_config`]).
+    /// Shrink the config to a ~1 minute run that still goes through every stage.
+    #[arg(long)]
     pub smoke: bool,
-    /// Override `device`.
+    /// Override the config's device: flex, ndarray, cuda[:N] or wgpu.
+    #[arg(long)]
     pub device: Option<DeviceKind>,
-    /// No progress bars and no per-epoch lines on stderr.
+    /// No progress bars and no per-epoch lines: only errors and the final summary.
+    #[arg(long)]
     pub quiet: bool,
+    /// Reuse runs/<name>/ when it exists instead of writing to the next free
+    /// runs/<name>-2, -3, … (ultralytics' exist_ok; --resume and --run-dir always use
+    /// the folder they name).
+    #[arg(long)]
+    pub exist_ok: bool,
 }
 
 /// What a finished run reports.
@@ -74,12 +85,12 @@ fn prepare_run(mut cfg: Config, opts: &TrainOptions) -> Result<(Config, PathBuf)
     if let Some(d) = opts.device {
         cfg.device = d;
     }
-    let run_dir = opts
-        .run_dir
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("runs").join(&cfg.name));
-    std::fs::create_dir_all(&run_dir)
-        .with_context(|| format!("cannot create run folder {}", run_dir.display()))?;
+    let run_dir = run_folder(
+        opts.run_dir.as_deref(),
+        &cfg.name,
+        opts.resume,
+        opts.exist_ok,
+    )?;
     Ok((cfg, run_dir))
 }
 
@@ -556,6 +567,9 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         val_inputs: Default::default(),
     };
     let loader = Loader::for_run(&cfg, real.clone(), synthetic, input as u32);
+    if st.epoch == 0 {
+        super::batch_plots::write_train_batches(&run_dir, &cfg, &loader, &split.train)?;
+    }
     let (mut train_imgs, mut train_secs) = (0usize, 0f64);
     let guard_names: Vec<&str> = loss_names.iter().copied().chain(["total"]).collect();
     let mut guard = DivergenceGuard::new(&guard_names);
@@ -613,6 +627,26 @@ fn test_best(run: &Run) -> Result<(Stats, usize)> {
         false,
     )?
     .stats;
+    if !run.split.val.is_empty() {
+        let ev = evaluate_ids(
+            &model,
+            run.real,
+            &run.split.val,
+            input,
+            run.base,
+            None,
+            false,
+        )?;
+        let gt = gt_subset(&run.real.gt, &run.split.val);
+        super::run_plots::write_val_plots(run.run_dir, &gt, &ev.detections, &run.class_names)?;
+        super::batch_plots::write_val_batches(
+            run.run_dir,
+            run.real,
+            &gt,
+            &run.split.val,
+            &ev.detections,
+        )?;
+    }
     run_files::write_test(
         run.run_dir,
         &TestRecord {

@@ -503,6 +503,9 @@ fn build(obj: &Value, state: Value) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
+    use std::io::Read;
+    use std::path::Path;
+
     use super::*;
 
     fn run(b: &[u8]) -> Result<Value> {

@@ -7,7 +7,9 @@
 
 use std::path::{Path, PathBuf};
 
-use chicktrain::commands::train::{eval_cmd, predict_cmd, SplitName, PREDICT_CONF};
+use chicktrain::commands::eval::{eval_cmd, EvalRequest};
+use chicktrain::commands::predict::{predict, PredictRequest};
+use chicktrain::commands::train::SplitName;
 use chicktrain::config::{self, Config};
 use chicktrain::train::run_files::{read_metrics, read_test, EpochRecord, StatsRecord};
 use chicktrain::train::smoke::smoke_config;
@@ -32,8 +34,12 @@ pub fn smoke_opts(dir: &Path) -> TrainOptions {
 
 /// `eval --json` of `checkpoint` on `split` (`data`: `--data`).
 pub fn eval_stats(checkpoint: &Path, split: SplitName, data: Option<&str>) -> StatsRecord {
-    serde_json::from_str(&eval_cmd(checkpoint, split, data, None, None, true, false).unwrap())
-        .unwrap()
+    let r = EvalRequest {
+        data: data.map(str::to_string),
+        json: true,
+        ..EvalRequest::new(checkpoint, split)
+    };
+    serde_json::from_str(&eval_cmd(&r).unwrap()).unwrap()
 }
 
 /// What [`smoke_scenario`] leaves for a test's own checks.
@@ -78,6 +84,23 @@ pub fn smoke_scenario(dir: &Path, config: &str, loss_names: &[&str]) -> SmokeRun
         "plots.png",
     ] {
         assert!(run.join(f).is_file(), "{f} missing");
+    }
+    // What ultralytics users look for first (issue 39): curves, confusion matrix, and
+    // the batch mosaics, each a decodable image of the size it is drawn at.
+    for (f, size) in [
+        ("BoxPR_curve.png", Some((640, 480))),
+        ("MaskPR_curve.png", Some((640, 480))),
+        ("BoxF1_curve.png", Some((640, 480))),
+        ("MaskF1_curve.png", Some((640, 480))),
+        ("confusion_matrix.png", Some((1120, 520))),
+        ("train_batch0.jpg", None),
+        ("val_batch0_labels.jpg", None),
+        ("val_batch0_pred.jpg", None),
+    ] {
+        let img = image::open(run.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        if let Some(wh) = size {
+            assert_eq!((img.width(), img.height()), wh, "{f}");
+        }
     }
     let resolved = config::load(run.join("config.toml").to_str().unwrap(), &[]).unwrap();
 
@@ -129,29 +152,15 @@ pub fn smoke_scenario(dir: &Path, config: &str, loss_names: &[&str]) -> SmokeRun
     image::RgbImage::from_pixel(80, 60, image::Rgb([200, 180, 150]))
         .save(img_dir.join("a.png"))
         .unwrap();
-    predict_cmd(
-        &best,
-        &img_dir,
-        &dir.join("pred"),
-        PREDICT_CONF,
-        None,
-        None,
-        false,
-    )
-    .unwrap();
+    predict(&PredictRequest::new(&best, &img_dir, &dir.join("pred"))).unwrap();
     assert!(dir.join("pred/a.png").is_file());
     chicktrain::annotations::coco::load_results(&dir.join("pred/results.json")).unwrap();
     // At another inference size (`--imgsz`, the model is convolutional) the boxes still
     // map back into the 80 × 60 image.
-    predict_cmd(
-        &best,
-        &img_dir,
-        &dir.join("pred128"),
-        PREDICT_CONF,
-        None,
-        Some(128),
-        false,
-    )
+    predict(&PredictRequest {
+        imgsz: Some(128),
+        ..PredictRequest::new(&best, &img_dir, &dir.join("pred128"))
+    })
     .unwrap();
     let dets =
         chicktrain::annotations::coco::load_results(&dir.join("pred128/results.json")).unwrap();
@@ -164,7 +173,10 @@ pub fn smoke_scenario(dir: &Path, config: &str, loss_names: &[&str]) -> SmokeRun
     // `--augment`: the eight views of the 80 × 60 image (four of them 60 × 80) fused
     // back into it: boxes inside it, masks of its size, scores above --conf.
     let conf = 0.01;
-    predict_cmd(&best, &img_dir, &dir.join("tta"), conf, None, None, true).unwrap();
+    let mut tta = PredictRequest::new(&best, &img_dir, &dir.join("tta"));
+    tta.opts.conf = conf;
+    tta.opts.augment = true;
+    predict(&tta).unwrap();
     let dets = chicktrain::annotations::coco::load_results(&dir.join("tta/results.json")).unwrap();
     for d in &dets {
         let b = d.bbox.unwrap();
