@@ -1,16 +1,19 @@
 //! The annotation foundation every stage stands on: COCO files and masks (RLE and
-//! polygons byte-identical to pycocotools), LabelMe import, YOLO-seg export, image files
-//! and the seeded train/val/test split.
+//! polygons byte-identical to pycocotools), COCO files per split, LabelMe import, YOLO-seg
+//! datasets in and out, image files and the train/val/test split.
 //!
 //! It imports nothing from the rest of the crate but [`crate::util`], so the renderer
 //! (which writes COCO) and the evaluator (which reads it) sit above it, and the training
 //! loader (`data/`) above the renderer.
 
 pub mod coco;
+pub mod coco_splits;
 pub mod image_file;
 pub mod labelme;
 pub mod mask;
 pub mod polygon;
 pub mod rle;
 pub mod split;
+pub mod yolo;
 pub mod yolo_export;
+pub mod yolo_yaml;

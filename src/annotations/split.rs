@@ -1,4 +1,7 @@
-//! Deterministic train/val/test split of a real dataset (the paper's 60/60/180 of 300).
+//! The train/val/test split of a real dataset, decided in one place
+//! ([`Split::for_dataset`]): the dataset's own split when its files declare one (a
+//! YOLO `data.yaml`'s `train`/`val`/`test`, one COCO file per split), otherwise a
+//! deterministic seeded draw (the paper's 60/60/180 of 300).
 
 use std::path::Path;
 
@@ -7,6 +10,53 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+
+/// One part of a split, as dataset files name it (`train`, `val`, `test`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    Train,
+    Val,
+    Test,
+}
+
+impl Part {
+    pub const ALL: [Part; 3] = [Part::Train, Part::Val, Part::Test];
+
+    pub fn key(self) -> &'static str {
+        match self {
+            Part::Train => "train",
+            Part::Val => "val",
+            Part::Test => "test",
+        }
+    }
+}
+
+/// The split a dataset's own files declare: image ids per part, disjoint. A part may be
+/// empty (a YOLO `data.yaml` without `test`); [`Split::for_dataset`] says what then.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct OwnSplit {
+    pub train: Vec<u64>,
+    pub val: Vec<u64>,
+    pub test: Vec<u64>,
+}
+
+impl OwnSplit {
+    /// Puts image `id` into `part`.
+    pub fn push(&mut self, part: Part, id: u64) {
+        match part {
+            Part::Train => self.train.push(id),
+            Part::Val => self.val.push(id),
+            Part::Test => self.test.push(id),
+        }
+    }
+
+    /// Keeps only the ids in `keep` (sorted), e.g. after `data.real.limit`.
+    pub fn retain(&mut self, keep: &[u64]) {
+        for part in [&mut self.train, &mut self.val, &mut self.test] {
+            part.retain(|i| keep.binary_search(i).is_ok());
+        }
+    }
+}
 
 /// Image ids per split, written next to a run so it can be reproduced.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -48,15 +98,51 @@ impl Split {
         })
     }
 
-    /// The split a training run uses: [`Split::new`], then at most `train_limit` of its
-    /// train ids ([`Split::limit_train`]). The trainer and `bench loader` both call it.
+    /// The one decision point for a dataset `ids` with its own split `own` (if any):
+    /// `fractions = [0, 0]` makes every image test (scoring an external set); otherwise
+    /// the dataset's own split when it has one (`fractions` unused), else
+    /// [`Split::new`]'s seeded draw. An own split without test images is an error:
+    /// the final numbers are taken on held-out test images, never on val.
+    pub fn for_dataset(
+        ids: &[u64],
+        own: Option<&OwnSplit>,
+        fractions: [f64; 2],
+        seed: u64,
+    ) -> Result<Split> {
+        let Some(own) = own.filter(|_| fractions != [0.0, 0.0]) else {
+            return Split::new(ids, fractions, seed);
+        };
+        if own.test.is_empty() {
+            bail!(
+                "the dataset's own split has {} train / {} val images and no test images: chicktrain scores the final checkpoint on held-out test images, so give the dataset a test part (`test:` in data.yaml, data.real.test for COCO)",
+                own.train.len(),
+                own.val.len()
+            );
+        }
+        let sorted = |v: &[u64]| {
+            let mut v = v.to_vec();
+            v.sort_unstable();
+            v
+        };
+        Ok(Split {
+            seed,
+            train: sorted(&own.train),
+            val: sorted(&own.val),
+            test: sorted(&own.test),
+        })
+    }
+
+    /// The split a training run uses: [`Split::for_dataset`], then at most `train_limit`
+    /// of its train ids ([`Split::limit_train`]). The trainer and `bench loader` both
+    /// call it.
     pub fn for_training(
         ids: &[u64],
+        own: Option<&OwnSplit>,
         fractions: [f64; 2],
         seed: u64,
         train_limit: Option<usize>,
     ) -> Result<Split> {
-        let mut s = Split::new(ids, fractions, seed)?;
+        let mut s = Split::for_dataset(ids, own, fractions, seed)?;
         if let Some(n) = train_limit {
             s.limit_train(n);
         }
@@ -95,6 +181,37 @@ mod tests {
         let mut all: Vec<u64> = [s.train, s.val, s.test].concat();
         all.sort_unstable();
         assert_eq!(all, ids);
+    }
+
+    #[test]
+    fn own_split_is_kept_unless_every_image_is_asked_for_as_test() {
+        let ids: Vec<u64> = (1..=6).collect();
+        let own = OwnSplit {
+            train: vec![3, 1],
+            val: vec![2],
+            test: vec![6, 4, 5],
+        };
+        let s = Split::for_training(&ids, Some(&own), [0.2, 0.2], 9, None).unwrap();
+        assert_eq!(
+            (s.train, s.val, s.test),
+            (vec![1, 3], vec![2], vec![4, 5, 6])
+        );
+        let all = Split::for_dataset(&ids, Some(&own), [0.0, 0.0], 9).unwrap();
+        assert_eq!(all.test, ids);
+        // No own split: the seeded draw, as before.
+        assert_eq!(
+            Split::for_dataset(&ids, None, [0.5, 0.2], 9).unwrap(),
+            Split::new(&ids, [0.5, 0.2], 9).unwrap()
+        );
+        let no_test = OwnSplit {
+            test: vec![],
+            ..own
+        };
+        let e = Split::for_dataset(&ids, Some(&no_test), [0.2, 0.2], 9).unwrap_err();
+        assert!(e.to_string().contains("no test images"), "{e}");
+        let mut limited = no_test.clone();
+        limited.retain(&[1, 2]);
+        assert_eq!((limited.train, limited.val), (vec![1], vec![2]));
     }
 
     #[test]

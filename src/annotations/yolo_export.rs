@@ -1,25 +1,126 @@
-//! COCO → YOLO-seg label files, for users who also train with ultralytics.
+//! COCO → a YOLO-seg dataset (`images/`, `labels/`, `data.yaml`), for users who also
+//! train with ultralytics, and for reading back with `kind = "yolo"` ([`super::yolo`]).
 //!
-//! Mirrors ultralytics' `convert_coco(use_segments=True)`: crowd and empty boxes are
-//! skipped, class = index of the category (sorted by id), coordinates normalised by the
-//! image size and printed with `%g`, several polygons of one instance joined into one
-//! outline by `merge_multi_segment` (nearest points linked, walked there and back).
-//! RLE instances are first traced into polygons.
+//! Labels mirror ultralytics' `convert_coco(use_segments=True)`: crowd and empty boxes
+//! are skipped, class = index of the category (sorted by id), coordinates normalised by
+//! the image size and printed with `%g`, several polygons of one instance joined into one
+//! outline by `merge_multi_segment` (nearest points linked, walked there and back). RLE
+//! instances are first traced into polygons.
+//!
+//! Beyond ultralytics (which writes labels only): the images found beside the COCO file
+//! are copied to `images/` (so the folder is a dataset as it stands), and `data.yaml`
+//! names the split. One file (no split): `train` and `val` both `images`, which
+//! chicktrain reads as "no split of its own". One file per split: `images/<split>/`,
+//! `labels/<split>/`, and `train`/`val`/`test` pointing at them. `data.yaml` has no
+//! `path`, so the dataset root is its own folder (for ultralytics too) and the folder
+//! can be moved.
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 
 use super::coco::{CocoDataset, Segmentation};
 use super::polygon::mask_to_polygons;
+use super::split::Part;
 
-/// Writes `labels/<image stem>.txt` per image and `data.yaml` under `out`.
-pub fn export(ds: &CocoDataset, out: &Path) -> Result<usize> {
-    let labels_dir = out.join("labels");
-    std::fs::create_dir_all(&labels_dir)
-        .with_context(|| format!("cannot create {}", labels_dir.display()))?;
-    let mut cats: Vec<_> = ds.categories.iter().collect();
-    cats.sort_by_key(|c| c.id);
+/// One COCO set to export: its split (`None`: the dataset has none), the dataset, and
+/// the folder its `file_name`s are relative to.
+pub struct ExportPart<'a> {
+    pub part: Option<Part>,
+    pub coco: &'a CocoDataset,
+    pub images: &'a Path,
+}
+
+/// What [`export`] wrote.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Exported {
+    pub labels: usize,
+    pub images: usize,
+}
+
+/// Writes the dataset of `parts` under `out`: all with `part: None` (one file, one
+/// folder each of images and labels) or each with its own split. Categories must be the
+/// same in every part.
+pub fn export(parts: &[ExportPart], out: &Path) -> Result<Exported> {
+    let Some(first) = parts.first() else {
+        bail!("nothing to export");
+    };
+    let split = first.part.is_some();
+    if parts.iter().any(|p| p.part.is_some() != split) || (!split && parts.len() > 1) {
+        bail!("export either one COCO set without a split or one per split");
+    }
+    let cats = sorted_categories(first.coco);
+    let mut done = Exported::default();
+    let mut keys = Vec::new();
+    for p in parts {
+        if sorted_categories(p.coco) != cats {
+            bail!(
+                "every split must have the same categories (ids and names) to share class indices"
+            );
+        }
+        let sub = p.part.map(Part::key).unwrap_or("");
+        if keys.contains(&sub) {
+            bail!("two COCO files for the {sub} split");
+        }
+        keys.push(sub);
+        let images_dir = out.join("images").join(sub);
+        done.labels += write_labels(p.coco, &cats, &out.join("labels").join(sub))?;
+        done.images += copy_images(p.coco, p.images, &images_dir)?;
+    }
+    let mut yaml = String::from(
+        "# Written by chicktrain convert coco2yolo. No `path`: the dataset root is this\n# file's folder.\n",
+    );
+    if split {
+        for p in Part::ALL {
+            if keys.contains(&p.key()) {
+                yaml.push_str(&format!("{}: images/{}\n", p.key(), p.key()));
+            }
+        }
+    } else {
+        yaml.push_str("# One COCO file, no split of its own: train and val are the same images.\ntrain: images\nval: images\n");
+    }
+    yaml.push_str("names:\n");
+    for (i, c) in cats.iter().enumerate() {
+        yaml.push_str(&format!("  {i}: {}\n", yaml_string(&c.1)));
+    }
+    crate::util::write_atomic(&out.join("data.yaml"), yaml.as_bytes())?;
+    Ok(done)
+}
+
+fn sorted_categories(ds: &CocoDataset) -> Vec<(u64, String)> {
+    let mut c: Vec<(u64, String)> = ds
+        .categories
+        .iter()
+        .map(|c| (c.id, c.name.clone()))
+        .collect();
+    c.sort();
+    c
+}
+
+/// A class name as a YAML scalar: plain when it is a plain word, else double-quoted
+/// (JSON escaping is valid YAML).
+fn yaml_string(s: &str) -> String {
+    let plain = !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_alphanumeric() || c == '_' || c == '-' || c == ' ')
+        && !s.starts_with(' ')
+        && !s.ends_with(' ')
+        && s.parse::<f64>().is_err()
+        && !matches!(
+            s.to_ascii_lowercase().as_str(),
+            "true" | "false" | "null" | "yes" | "no" | "on" | "off" | "~"
+        );
+    if plain {
+        s.to_string()
+    } else {
+        serde_json::to_string(s).unwrap_or_default()
+    }
+}
+
+/// `<image stem>.txt` per image of `ds` under `dir`, classes indexed by `cats`.
+fn write_labels(ds: &CocoDataset, cats: &[(u64, String)], dir: &Path) -> Result<usize> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut stems = std::collections::HashSet::new();
     let mut written = 0;
     for im in &ds.images {
         let (w, h) = (im.width as f64, im.height as f64);
@@ -28,7 +129,7 @@ pub fn export(ds: &CocoDataset, out: &Path) -> Result<usize> {
             if a.iscrowd != 0 || a.bbox[2] <= 0.0 || a.bbox[3] <= 0.0 {
                 continue;
             }
-            let Some(cls) = cats.iter().position(|c| c.id == a.category_id) else {
+            let Some(cls) = cats.iter().position(|c| c.0 == a.category_id) else {
                 continue;
             };
             let polys = match &a.segmentation {
@@ -46,21 +147,19 @@ pub fn export(ds: &CocoDataset, out: &Path) -> Result<usize> {
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| im.id.to_string());
+        if !stems.insert(stem.clone()) {
+            bail!(
+                "two images have the file name stem {stem:?} (the second: {}); YOLO label files are named by it",
+                im.file_name
+            );
+        }
         let mut text = lines.join("\n");
         if !text.is_empty() {
             text.push('\n');
         }
-        crate::util::write_atomic(&labels_dir.join(format!("{stem}.txt")), text.as_bytes())?;
+        crate::util::write_atomic(&dir.join(format!("{stem}.txt")), text.as_bytes())?;
         written += 1;
     }
-    let mut yaml = format!(
-        "path: {}\ntrain: images\nval: images\nnames:\n",
-        out.display()
-    );
-    for (i, c) in cats.iter().enumerate() {
-        yaml.push_str(&format!("  {i}: {}\n", c.name));
-    }
-    crate::util::write_atomic(&out.join("data.yaml"), yaml.as_bytes())?;
     Ok(written)
 }
 
@@ -81,6 +180,39 @@ pub fn polygon_line(cls: usize, polys: &[Vec<f64>], (w, h): (f64, f64)) -> Optio
         line.push_str(&fmt_g(y / h));
     }
     Some(line)
+}
+
+/// Copies the images of `ds` (relative to `root`) into `dir` under their file names.
+/// None found: labels only (0, as ultralytics' converter); some found but not all: an
+/// error naming a missing one.
+fn copy_images(ds: &CocoDataset, root: &Path, dir: &Path) -> Result<usize> {
+    let found = ds
+        .images
+        .iter()
+        .filter(|im| root.join(&im.file_name).is_file())
+        .count();
+    if found == 0 {
+        return Ok(0);
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    for im in &ds.images {
+        let src = root.join(&im.file_name);
+        if !src.is_file() {
+            bail!(
+                "image {} (id {}) does not exist, though {found} other images of the set do",
+                src.display(),
+                im.id
+            );
+        }
+        let name = src
+            .file_name()
+            .context("an image file_name without a name")?;
+        let dst = dir.join(name);
+        let bytes =
+            std::fs::read(&src).with_context(|| format!("cannot read {}", src.display()))?;
+        crate::util::write_atomic(&dst, &bytes)?;
+    }
+    Ok(found)
 }
 
 fn pairs(p: &[f64]) -> Vec<[f64; 2]> {

@@ -75,7 +75,13 @@ pub fn bench_loader(cfg: &Config, batches: usize, threads: Option<usize>) -> Res
     }
     let t0 = Instant::now();
     let real = RealSet::load(&cfg.data, cfg.seed)?;
-    let split = Split::for_training(&real.ids(), cfg.data.split, cfg.seed, cfg.data.train_limit)?;
+    let split = Split::for_training(
+        &real.ids(),
+        real.own_split.as_ref(),
+        cfg.data.split,
+        cfg.seed,
+        cfg.data.train_limit,
+    )?;
     let synthetic = SyntheticSet::new(&cfg.data, cfg.seed);
     synthetic.prepare()?;
     let input = DetectorConfig::from_config(cfg, real.num_classes())?.input_size();

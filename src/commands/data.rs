@@ -1,13 +1,13 @@
 //! The data commands: `render`, `convert`, `coco-eval`, `bench coco`, `bench render`
 //! (none needs Burn).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 
 use crate::annotations::coco::{load_results, CocoDataset};
-use crate::annotations::{labelme, yolo_export};
+use crate::annotations::{coco_splits, labelme, yolo_export};
 use crate::config::Randomize;
 use crate::eval::{evaluate, IouType};
 
@@ -73,20 +73,50 @@ pub fn convert_labelme(r: &LabelmeRequest) -> Result<String> {
 /// `convert coco2yolo` as given on the command line.
 #[derive(Clone, Debug, clap::Args)]
 pub struct Coco2yoloRequest {
-    /// The COCO instances file to convert.
-    pub coco: PathBuf,
-    /// Output folder: labels/<image stem>.txt and data.yaml are written here.
+    /// COCO instances file(s): one file, or one per split named for it (train.json
+    /// val.json test.json); the images beside each file are copied too.
+    #[arg(required = true, num_args = 1..=3)]
+    pub coco: Vec<PathBuf>,
+    /// Output folder: images/, labels/<image stem>.txt and data.yaml are written here.
     #[arg(long)]
     pub out: PathBuf,
 }
 
-/// `chicktrain convert coco2yolo coco.json --out DIR`.
+/// `chicktrain convert coco2yolo coco.json --out DIR`, or one file per split
+/// (`train.json val.json test.json`, each split named by its file, see
+/// [`coco_splits::part_of_file`]): labels, the images found beside each file, and
+/// `data.yaml` (see [`yolo_export`]).
 pub fn convert_coco2yolo(r: &Coco2yoloRequest) -> Result<String> {
-    let out = &r.out;
-    let ds = CocoDataset::load(&r.coco)?;
-    let n = yolo_export::export(&ds, out)?;
+    let (coco, out) = (&r.coco, &r.out);
+    let mut sets = Vec::with_capacity(coco.len());
+    for f in coco {
+        let part = match coco.len() {
+            1 => None,
+            _ => Some(coco_splits::part_of_file(f)?),
+        };
+        let images = f.parent().map(Path::to_path_buf).unwrap_or_default();
+        sets.push((part, CocoDataset::load(f)?, images));
+    }
+    let parts: Vec<yolo_export::ExportPart> = sets
+        .iter()
+        .map(|(part, coco, images)| yolo_export::ExportPart {
+            part: *part,
+            coco,
+            images,
+        })
+        .collect();
+    let n = yolo_export::export(&parts, out)?;
+    let images = match n.images {
+        0 => format!(
+            "no images found beside the COCO file{}: put them under {}",
+            if coco.len() > 1 { "s" } else { "" },
+            out.join("images").display()
+        ),
+        k => format!("{k} images under {}", out.join("images").display()),
+    };
     Ok(format!(
-        "wrote {n} label files under {} and {}",
+        "wrote {} label files under {}, {images}, and {}",
+        n.labels,
         out.join("labels").display(),
         out.join("data.yaml").display()
     ))

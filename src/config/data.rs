@@ -14,8 +14,11 @@ use super::randomize::Randomize;
 pub enum RealKind {
     /// Rendered with the `proxy-real` preset: a stand-in, not real photos.
     Proxy,
+    /// One COCO instances file (`annotations`) or one per split (`train`, `val`, `test`).
     Coco,
     Labelme,
+    /// A YOLO-seg dataset (ultralytics, Roboflow): its `data.yaml` (`yaml`).
+    Yolo,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -25,12 +28,24 @@ pub struct RealConfig {
     /// Proxy: how many images to render (the paper has 300 real photos).
     #[serde(default = "default_real_count")]
     pub count: usize,
-    /// COCO: the annotations file.
+    /// COCO: the annotations file of a dataset without a split of its own.
     #[serde(default)]
     pub annotations: Option<PathBuf>,
-    /// COCO: folder that `file_name`s are relative to.
+    /// COCO split into files: the train, val and test annotations files (instead of
+    /// `annotations`); the run keeps this split instead of drawing `data.split`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train: Option<PathBuf>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub val: Option<PathBuf>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test: Option<PathBuf>,
+    /// COCO: folder that `file_name`s are relative to (default: each annotations
+    /// file's folder).
     #[serde(default)]
     pub images: Option<PathBuf>,
+    /// YOLO: the dataset's `data.yaml`; its `train`/`val`/`test` are the split.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub yaml: Option<PathBuf>,
     /// LabelMe: folder of `.json` + images.
     #[serde(default)]
     pub dir: Option<PathBuf>,
@@ -51,7 +66,9 @@ fn default_real_count() -> usize {
 pub struct DataConfig {
     pub real: RealConfig,
     /// Train and val fractions of the real set; the rest is test (paper: 60/60/180).
-    /// `[0, 0]` makes every image test: a set to score with `eval --data`, not to train on.
+    /// Not used when the dataset has its own split (a YOLO `data.yaml`, COCO files per
+    /// split). `[0, 0]` makes every image test: a set to score with `eval --data`, not to
+    /// train on.
     #[serde(default = "default_split")]
     pub split: [f64; 2],
     /// Train on only N of the split's train images (drawn by the seed), val and test as
@@ -142,13 +159,32 @@ impl DataConfig {
                 }
             }
             RealKind::Coco => {
-                let a = d.real.annotations.as_ref().context(
-                    "data.real.kind = \"coco\" needs data.real.annotations (a COCO .json)",
-                )?;
-                must_exist(a, "data.real.annotations")?;
-                if let Some(i) = &d.real.images {
+                let r = &d.real;
+                let split_files = r.train.is_some() || r.val.is_some() || r.test.is_some();
+                match (&r.annotations, split_files) {
+                    (Some(_), true) => bail!("data.real.annotations and data.real.train/val/test are two ways to give a COCO set: one file without a split, or one file per split; set one of them"),
+                    (Some(a), false) => must_exist(a, "data.real.annotations")?,
+                    (None, true) => {
+                        let (Some(t), Some(v)) = (&r.train, &r.val) else {
+                            bail!("a COCO set split into files needs data.real.train and data.real.val (and data.real.test for the final scores)");
+                        };
+                        must_exist(t, "data.real.train")?;
+                        must_exist(v, "data.real.val")?;
+                        if let Some(t) = &r.test {
+                            must_exist(t, "data.real.test")?;
+                        }
+                    }
+                    (None, false) => bail!("data.real.kind = \"coco\" needs data.real.annotations (a COCO .json), or data.real.train, .val and .test (one per split)"),
+                }
+                if let Some(i) = &r.images {
                     must_exist(i, "data.real.images")?;
                 }
+            }
+            RealKind::Yolo => {
+                let y = d.real.yaml.as_ref().context(
+                    "data.real.kind = \"yolo\" needs data.real.yaml (the dataset's data.yaml)",
+                )?;
+                must_exist(y, "data.real.yaml")?;
             }
             RealKind::Labelme => {
                 let dir = d

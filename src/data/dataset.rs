@@ -1,6 +1,8 @@
-//! Training data sources: the "real" set (proxy-real renders, a COCO file + image folder,
-//! or a LabelMe folder) and the synthetic renders, both yielding [`Sample`]s at the
-//! network's square input size.
+//! Training data sources: the "real" set (proxy-real renders, a COCO file + image folder
+//! or one COCO file per split, a LabelMe folder, a YOLO-seg dataset) and the synthetic
+//! renders, both yielding [`Sample`]s at the network's square input size. A real set
+//! whose files declare a split carries it ([`RealSet::own_split`]) for
+//! `Split::for_dataset`.
 //!
 //! The real set keeps its COCO ground truth at the *original* image size (that is what
 //! the evaluator scores against) and decodes images lazily, one per request, so a
@@ -20,9 +22,11 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::annotations::coco::{CocoCategory, CocoDataset, CocoImage};
-use crate::annotations::labelme;
+use crate::annotations::coco_splits::{self, SplitFile};
 pub use crate::annotations::mask::resize_mask;
 use crate::annotations::mask::Mask;
+use crate::annotations::split::{OwnSplit, Part};
+use crate::annotations::{labelme, yolo};
 use crate::config::{DataConfig, RealKind};
 use crate::data::letterbox::Letterbox;
 use crate::render::cache::{cache_dir, effective_seed, load_or_render};
@@ -81,17 +85,22 @@ pub struct RealSet {
     pub cat_ids: Vec<u64>,
     /// True for proxy-real renders (every report must call them a proxy).
     pub proxy: bool,
+    /// The split the dataset's files declare (YOLO `train`/`val`/`test`, one COCO file
+    /// per split); `None`: the run draws one.
+    pub own_split: Option<OwnSplit>,
     source: RealSource,
 }
 
 impl RealSet {
     /// Loads (for proxy: renders or reads from the cache `data.cache`) the real set of
-    /// `data`; `data.real.limit` keeps only the first N images (by id).
+    /// `data`; `data.real.limit` keeps only N images (the first by id, or with an own
+    /// split the first of each part in turn).
     pub fn load(data: &DataConfig, seed: u64) -> Result<RealSet> {
         let size = data.image_size;
         let limit = data.real.limit;
         let cache_root = Some(data.cache.as_path());
         let real = &data.real;
+        let mut own_split = None;
         let (mut gt, source) = match real.kind {
             RealKind::Proxy => {
                 let opts = render_options(true, size);
@@ -100,55 +109,32 @@ impl RealSet {
                     None => None,
                 };
                 let n = limit.map_or(real.count, |l| l.min(real.count));
-                let anns = render_many(
-                    &opts,
-                    seed,
-                    n as u64,
-                    cache.as_deref(),
-                    "proxy-real",
-                    |k, s| {
-                        let id = k + 1;
-                        annotations(&s.ids, size, size, &s.instances, id, id * 1000)
-                    },
-                )?;
-                let mut ds = CocoDataset {
-                    info: Some(
-                        serde_json::json!({"description": "chicktrain proxy-real renders (a stand-in for real photos)"}),
-                    ),
-                    licenses: None,
-                    images: Vec::new(),
-                    annotations: Vec::new(),
-                    categories: vec![CocoCategory {
-                        id: CARCASS_CATEGORY,
-                        name: "carcass".into(),
-                        extra: Default::default(),
-                    }],
-                };
-                for (k, a) in anns.into_iter().enumerate() {
-                    let id = k as u64 + 1;
-                    ds.images.push(CocoImage {
-                        id,
-                        file_name: format!("proxy-real/{k:06}.jpg"),
-                        width: size,
-                        height: size,
-                        extra: Default::default(),
-                    });
-                    ds.annotations.extend(a);
+                (
+                    proxy_set(&opts, size, seed, n, cache.as_deref())?,
+                    RealSource::Proxy { opts, seed, cache },
+                )
+            }
+            RealKind::Coco => match &real.annotations {
+                Some(ann) => {
+                    let ds = CocoDataset::load(ann)?;
+                    let root = match &real.images {
+                        Some(d) => d.clone(),
+                        None => ann.parent().map(Path::to_path_buf).unwrap_or_default(),
+                    };
+                    (ds, RealSource::Files { root })
                 }
-                (ds, RealSource::Proxy { opts, seed, cache })
-            }
-            RealKind::Coco => {
-                let ann = real
-                    .annotations
-                    .as_ref()
-                    .context("data.real.annotations is not set")?;
-                let ds = CocoDataset::load(ann)?;
-                let root = match &real.images {
-                    Some(d) => d.clone(),
-                    None => ann.parent().map(Path::to_path_buf).unwrap_or_default(),
-                };
-                (ds, RealSource::Files { root })
-            }
+                None => {
+                    let (ds, own) = coco_splits::load(&split_files(real)?)?;
+                    own_split = Some(own);
+                    // file_names include their folders.
+                    (
+                        ds,
+                        RealSource::Files {
+                            root: PathBuf::new(),
+                        },
+                    )
+                }
+            },
             RealKind::Labelme => {
                 let dir = real.dir.as_ref().context("data.real.dir is not set")?;
                 let labels = real
@@ -159,15 +145,22 @@ impl RealSet {
                 let ds = labelme::load_dir(dir, labels.as_deref())?;
                 (ds, RealSource::Files { root: dir.clone() })
             }
+            RealKind::Yolo => {
+                let y = real.yaml.as_ref().context("data.real.yaml is not set")?;
+                let ds = yolo::load(y)?;
+                own_split = ds.own_split;
+                (ds.coco, RealSource::Files { root: ds.root })
+            }
         };
         gt.validate().context("real dataset")?;
         if let Some(l) = limit {
-            let mut ids: Vec<u64> = gt.images.iter().map(|i| i.id).collect();
-            ids.sort_unstable();
-            ids.truncate(l);
+            let ids = limited_ids(&gt, own_split.as_ref(), l);
             gt.images.retain(|i| ids.binary_search(&i.id).is_ok());
             gt.annotations
                 .retain(|a| ids.binary_search(&a.image_id).is_ok());
+            if let Some(own) = &mut own_split {
+                own.retain(&ids);
+            }
         }
         if gt.images.is_empty() {
             bail!("the real dataset has no images");
@@ -194,6 +187,7 @@ impl RealSet {
             gt,
             cat_ids,
             proxy: matches!(source, RealSource::Proxy { .. }),
+            own_split,
             source,
         })
     }
@@ -279,6 +273,96 @@ impl RealSet {
         }
         Ok(Sample { image, instances })
     }
+}
+
+/// The proxy-real set: `n` renders of `opts` as COCO ground truth (image id `k + 1` is
+/// render `k`).
+fn proxy_set(
+    opts: &RenderOptions,
+    size: u32,
+    seed: u64,
+    n: usize,
+    cache: Option<&Path>,
+) -> Result<CocoDataset> {
+    let anns = render_many(opts, seed, n as u64, cache, "proxy-real", |k, s| {
+        let id = k + 1;
+        annotations(&s.ids, size, size, &s.instances, id, id * 1000)
+    })?;
+    let mut ds = CocoDataset {
+        info: Some(
+            serde_json::json!({"description": "chicktrain proxy-real renders (a stand-in for real photos)"}),
+        ),
+        licenses: None,
+        images: Vec::new(),
+        annotations: Vec::new(),
+        categories: vec![CocoCategory {
+            id: CARCASS_CATEGORY,
+            name: "carcass".into(),
+            extra: Default::default(),
+        }],
+    };
+    for (k, a) in anns.into_iter().enumerate() {
+        let id = k as u64 + 1;
+        ds.images.push(CocoImage {
+            id,
+            file_name: format!("proxy-real/{k:06}.jpg"),
+            width: size,
+            height: size,
+            extra: Default::default(),
+        });
+        ds.annotations.extend(a);
+    }
+    Ok(ds)
+}
+
+/// `data.real.train`/`val`/`test` as split files, each with its images folder
+/// (`data.real.images`, else the file's own folder).
+fn split_files(real: &crate::config::RealConfig) -> Result<Vec<SplitFile>> {
+    let mut files = Vec::new();
+    for (part, f) in [
+        (Part::Train, &real.train),
+        (Part::Val, &real.val),
+        (Part::Test, &real.test),
+    ] {
+        let Some(f) = f else { continue };
+        let images = match &real.images {
+            Some(d) => d.clone(),
+            None => f.parent().map(Path::to_path_buf).unwrap_or_default(),
+        };
+        files.push(SplitFile {
+            part,
+            annotations: f.clone(),
+            images,
+        });
+    }
+    if files.len() < 2 {
+        bail!("a COCO set split into files needs data.real.train and data.real.val");
+    }
+    Ok(files)
+}
+
+/// The ids `data.real.limit = l` keeps, sorted: the first `l` by id; with an own split,
+/// taken in turn from its train, val and test parts (each in id order), so every part
+/// keeps images.
+fn limited_ids(gt: &CocoDataset, own: Option<&OwnSplit>, l: usize) -> Vec<u64> {
+    let mut ids: Vec<u64> = match own {
+        None => {
+            let mut ids: Vec<u64> = gt.images.iter().map(|i| i.id).collect();
+            ids.sort_unstable();
+            ids.truncate(l);
+            ids
+        }
+        Some(own) => {
+            let parts = [&own.train, &own.val, &own.test];
+            let longest = parts.iter().map(|p| p.len()).max().unwrap_or(0);
+            (0..longest)
+                .flat_map(|k| parts.iter().filter_map(move |p| p.get(k).copied()))
+                .take(l)
+                .collect()
+        }
+    };
+    ids.sort_unstable();
+    ids
 }
 
 /// Renders (or reads from `cache`) samples `0..n` in parallel, with a progress bar,

@@ -392,7 +392,8 @@ pub fn inference_size(trained: usize, imgsz: Option<usize>) -> Result<usize> {
 
 /// Scores `checkpoint`'s weights on `split` of the data it was trained with, rebuilt from
 /// its header; with `data`, on the real set of that config instead (e.g. your photos),
-/// split by its `data.split` and seed (`[0, 0]`: every image is test) and letterboxed
+/// split as `Split::for_dataset` decides (its own split, else by its `data.split` and
+/// seed; `[0, 0]`: every image is test) and letterboxed
 /// to the checkpoint's input size (or `imgsz`, see [`inference_size`]); with `augment`,
 /// by test-time augmentation ([`augmented`]).
 pub fn score_checkpoint(
@@ -420,7 +421,12 @@ pub fn score_checkpoint(
         Some(name) => {
             let cfg = config::load(name, &[])?;
             let real = RealSet::load(&cfg.data, cfg.seed)?;
-            let split = Split::new(&real.ids(), cfg.data.split, cfg.seed)?;
+            let split = Split::for_dataset(
+                &real.ids(),
+                real.own_split.as_ref(),
+                cfg.data.split,
+                cfg.seed,
+            )?;
             (real, split, format!("the data of {name}"))
         }
     };

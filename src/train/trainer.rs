@@ -142,7 +142,13 @@ fn load_data(
     let real = RealSet::load(&cfg.data, cfg.seed)?;
     let split = match resume {
         Some(ck) => ck.header.split.clone(),
-        None => Split::for_training(&real.ids(), cfg.data.split, cfg.seed, cfg.data.train_limit)?,
+        None => Split::for_training(
+            &real.ids(),
+            real.own_split.as_ref(),
+            cfg.data.split,
+            cfg.seed,
+            cfg.data.train_limit,
+        )?,
     };
     if split.train.is_empty() || split.val.is_empty() || split.test.is_empty() {
         bail!(
