@@ -438,8 +438,8 @@ fn iou(a: &Rle, b: &Rle) -> f64 {
     let (a, b) = (a.decode(), b.decode());
     let (mut inter, mut union) = (0u64, 0u64);
     for (x, y) in a.data.iter().zip(&b.data) {
-        inter += (*x && *y) as u64;
-        union += (*x || *y) as u64;
+        inter += (*x != 0 && *y != 0) as u64;
+        union += (*x != 0 || *y != 0) as u64;
     }
     inter as f64 / union.max(1) as f64
 }
