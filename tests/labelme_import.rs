@@ -1,5 +1,6 @@
-//! LabelMe import against labelme's own `labelme2coco.py` output on the labelme
-//! project's example annotations (kept in ../shared/fixtures, not in this repository).
+//! LabelMe import against labelme's own `labelme2coco.py` output on LabelMe files of our
+//! own (`tests/fixtures/labelme/`, made by its `make_fixture.py`: labelme's example
+//! annotations are GPL-3.0 and stay out of this repository).
 //!
 //! Instances, categories and polygons must be identical. Areas and boxes are computed
 //! with pycocotools' rasteriser, which leaves out the one-pixel outline that labelme's
@@ -11,17 +12,13 @@ use std::path::PathBuf;
 use chicktrain::annotations::coco::{CocoDataset, Segmentation};
 use chicktrain::annotations::labelme;
 
-fn examples() -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/fixtures/labelme-examples");
-    p.exists().then_some(p)
+fn examples() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/labelme")
 }
 
 #[test]
-fn matches_labelme2coco_on_real_annotations() {
-    let Some(dir) = examples() else {
-        eprintln!("../shared/fixtures/labelme-examples is absent: nothing to compare against");
-        return;
-    };
+fn matches_labelme2coco_on_our_fixture() {
+    let dir = examples();
     let labels = labelme::read_labels(&dir.join("labels.txt")).unwrap();
     let ours = labelme::load_dir(&dir.join("data_annotated"), Some(&labels)).unwrap();
     let theirs: CocoDataset = serde_json::from_str(
@@ -80,7 +77,7 @@ fn matches_labelme2coco_on_real_annotations() {
             assert!(a.bbox[3] <= b.bbox[3] && a.bbox[3] >= b.bbox[3] - 2.0);
         }
     }
-    // the two-part person (group_id 0) stays one instance with two polygons
+    // the two-part carcass (group_id 0) stays one instance with two polygons
     let two_part = ours
         .annotations
         .iter()
