@@ -253,6 +253,18 @@ pub struct CocoDataset {
 }
 
 impl CocoDataset {
+    /// The categories as sorted `(id, name)` pairs: what two sets must share to be one
+    /// dataset (the splits of one COCO set, the parts of one YOLO export).
+    pub fn sorted_categories(&self) -> Vec<(u64, String)> {
+        let mut c: Vec<(u64, String)> = self
+            .categories
+            .iter()
+            .map(|c| (c.id, c.name.clone()))
+            .collect();
+        c.sort();
+        c
+    }
+
     /// Reads and validates a COCO file; errors name the file, the line or the entry.
     pub fn load(path: &Path) -> Result<CocoDataset> {
         let text = std::fs::read_to_string(path)

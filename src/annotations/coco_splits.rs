@@ -39,27 +39,18 @@ pub fn load(files: &[SplitFile]) -> Result<(CocoDataset, OwnSplit)> {
 
 /// [`load`] on already-read datasets (`loaded[i]` is `files[i]`'s).
 pub fn merge(files: &[SplitFile], loaded: Vec<CocoDataset>) -> Result<(CocoDataset, OwnSplit)> {
-    let cats = |ds: &CocoDataset| {
-        let mut c: Vec<(u64, String)> = ds
-            .categories
-            .iter()
-            .map(|c| (c.id, c.name.clone()))
-            .collect();
-        c.sort();
-        c
-    };
     let mut out = CocoDataset::default();
     let mut own = OwnSplit::default();
     for (i, (f, ds)) in files.iter().zip(loaded).enumerate() {
         if i == 0 {
             out.categories = ds.categories.clone();
-        } else if cats(&ds) != cats(&out) {
+        } else if ds.sorted_categories() != out.sorted_categories() {
             bail!(
                 "the categories of {} {:?} differ from those of {} {:?}: every split must have the same (id, name) pairs",
                 f.annotations.display(),
-                cats(&ds),
+                ds.sorted_categories(),
                 files[0].annotations.display(),
-                cats(&out)
+                out.sorted_categories()
             );
         }
         let first_id = out.images.len() as u64 + 1;

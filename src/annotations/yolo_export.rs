@@ -49,11 +49,11 @@ pub fn export(parts: &[ExportPart], out: &Path) -> Result<Exported> {
     if parts.iter().any(|p| p.part.is_some() != split) || (!split && parts.len() > 1) {
         bail!("export either one COCO set without a split or one per split");
     }
-    let cats = sorted_categories(first.coco);
+    let cats = first.coco.sorted_categories();
     let mut done = Exported::default();
     let mut keys = Vec::new();
     for p in parts {
-        if sorted_categories(p.coco) != cats {
+        if p.coco.sorted_categories() != cats {
             bail!(
                 "every split must have the same categories (ids and names) to share class indices"
             );
@@ -85,16 +85,6 @@ pub fn export(parts: &[ExportPart], out: &Path) -> Result<Exported> {
     }
     crate::util::write_atomic(&out.join("data.yaml"), yaml.as_bytes())?;
     Ok(done)
-}
-
-fn sorted_categories(ds: &CocoDataset) -> Vec<(u64, String)> {
-    let mut c: Vec<(u64, String)> = ds
-        .categories
-        .iter()
-        .map(|c| (c.id, c.name.clone()))
-        .collect();
-    c.sort();
-    c
 }
 
 /// A class name as a YAML scalar: plain when it is a plain word, else double-quoted
