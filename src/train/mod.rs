@@ -1,4 +1,5 @@
-//! Training: the run ([`trainer`]: prepare, data, state, epochs, checkpoints, test) over
+//! Training: the run ([`trainer`]: [`prepare`] the folder and data, state, [`epoch`]s of
+//! steps, [`run`]'s epoch ends and test, [`lines`] printed) over
 //! the trainable models (`infer::detector`), fed by [`loader`]; learning-rate schedule
 //! ([`schedule`]), optimisers and global-norm clipping ([`optim`]), weight EMA ([`ema`]),
 //! divergence stop ([`divergence`]), f16 loss scaling ([`loss_scale`]; the casts are
@@ -11,12 +12,16 @@
 pub mod batch_plots;
 pub mod divergence;
 pub mod ema;
+pub mod epoch;
 pub mod init;
 pub mod interrupt;
+pub mod lines;
 pub mod loader;
 pub mod loss_scale;
 pub mod optim;
 pub mod plot;
+pub mod prepare;
+pub mod run;
 pub mod run_files;
 pub mod run_folder;
 pub mod run_plots;
