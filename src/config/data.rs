@@ -7,6 +7,7 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 use super::randomize::Randomize;
+use super::self_training::UnlabeledConfig;
 
 /// Where the "real" images come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -97,6 +98,10 @@ pub struct DataConfig {
     /// `config::randomize`.
     #[serde(default = "default_randomize")]
     pub randomize: Randomize,
+    /// `[data.unlabeled]`: photos without labels; setting it turns self-training on
+    /// (`[train.self_training]`, see `config::self_training`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unlabeled: Option<UnlabeledConfig>,
 }
 
 /// The geometry groups on, the appearance groups opt-in (see `Randomize::TRAINING`).
@@ -196,6 +201,14 @@ impl DataConfig {
                 if let Some(l) = &d.real.labels {
                     must_exist(l, "data.real.labels")?;
                 }
+            }
+        }
+        if let Some(u) = &d.unlabeled {
+            if !u.images.is_dir() {
+                bail!(
+                    "data.unlabeled.images = {:?} is not a folder (a folder of .jpg/.jpeg/.png photos without labels)",
+                    u.images.display().to_string()
+                );
             }
         }
         Ok(())

@@ -1,7 +1,8 @@
 //! The training loader, above the renderer: sources (`dataset`: the real set and the
 //! synthetic renders), augmentation (`augment`, with its parts `affine`, `mosaic` and
 //! `copy_paste`), batching (`batch`) into the model-neutral
-//! ground truth [`targets::Targets`], and the letterbox between image and network input.
+//! ground truth [`targets::Targets`], the letterbox between image and network input, and
+//! the unlabeled photos of self-training with their pseudo-labels (`unlabeled`).
 //! The COCO types it reads live in [`crate::annotations`].
 
 #[cfg(feature = "train")]
@@ -19,3 +20,5 @@ pub mod letterbox;
 #[cfg(feature = "train")]
 pub mod mosaic;
 pub mod targets;
+#[cfg(feature = "train")]
+pub mod unlabeled;

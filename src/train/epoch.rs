@@ -15,9 +15,10 @@ use crate::infer::precision::{float_dtype, graph_cast};
 use crate::util::progress;
 
 use super::divergence::{At, DivergenceGuard};
-use super::loader::{epoch_batches, mix, Loader, Mix};
+use super::loader::{epoch_batches, mix, Item, Loader, Mix};
 use super::optim;
 use super::schedule::step_lr;
+use super::self_training::mix_in;
 use super::state::TrainState;
 
 /// The steps of one epoch, as far as they got.
@@ -33,6 +34,8 @@ pub struct EpochSteps {
     pub data_wait: f64,
     /// f16: steps skipped by the loss scaler.
     pub skipped: usize,
+    /// Self-training: pseudo-labelled items in the epoch's plan.
+    pub pseudo_items: usize,
 }
 
 /// Runs the optimiser steps of `epoch` over `loader`'s batches.
@@ -54,6 +57,18 @@ pub fn run_epoch(
     // `train.steps_per_epoch` is.
     let per_epoch = m.steps(train_ids.len(), cfg.data.synthetic, bsz);
     let plan = epoch_batches(train_ids, cfg.data.synthetic, cfg.seed, epoch, bsz, m)?;
+    // Self-training: pseudo-labelled images take their share of each batch, same steps.
+    let plan = match &loader.pseudo {
+        Some(p) => {
+            let st = cfg.train.self_training.clone().unwrap_or_default();
+            mix_in(plan, &p.pool(), st.per_batch(bsz), bsz, cfg.seed, epoch)
+        }
+        None => plan,
+    };
+    let pseudo_items = plan
+        .iter()
+        .filter(|i| matches!(i, Item::Unlabeled(_)))
+        .count();
     let bar = if quiet {
         indicatif::ProgressBar::hidden()
     } else {
@@ -71,6 +86,7 @@ pub fn run_epoch(
         interrupted: None,
         data_wait: 0.0,
         skipped: 0,
+        pseudo_items,
     };
     let result: Result<()> = std::thread::scope(|sc| {
         let rx = loader.spawn(sc, &plan, bsz, epoch);

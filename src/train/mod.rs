@@ -4,7 +4,8 @@
 //! ([`schedule`]), optimisers and global-norm clipping ([`optim`]), weight EMA ([`ema`]),
 //! divergence stop ([`divergence`]), f16 loss scaling ([`loss_scale`]; the casts are
 //! `infer::precision`), starting weights (`model.init`, [`init`]), the run folder's
-//! other files ([`run_files`]) and plots ([`plot`]). Checkpoint files, the model
+//! other files ([`run_files`]) and plots ([`plot`]), self-training on unlabeled photos
+//! ([`self_training`]). Checkpoint files, the model
 //! wrapper and per-epoch COCO validation are `infer`'s, below it: running a trained
 //! model never imports the training loop. The commands built on it live in `commands/`,
 //! above it.
@@ -26,6 +27,7 @@ pub mod run_files;
 pub mod run_folder;
 pub mod run_plots;
 pub mod schedule;
+pub mod self_training;
 pub mod smoke;
 pub mod state;
 pub mod trainer;

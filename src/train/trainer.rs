@@ -32,6 +32,7 @@ pub use super::prepare::TrainOptions;
 use super::prepare::{load_data, prepare_run, resume_point};
 use super::run::{test_best, Run};
 use super::run_files;
+use super::self_training::SelfTraining;
 use super::state::TrainState;
 
 /// What a finished run reports.
@@ -91,14 +92,26 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         input,
         val_inputs: Default::default(),
     };
-    let loader = Loader::for_run(&cfg, real.clone(), synthetic, input as u32);
+    let mut selftrain = SelfTraining::for_run(&cfg, real.num_classes(), &base, &run_dir, st.epoch)?;
+    if let Some(s) = &selftrain {
+        say(s.describe(cfg.train.epochs, cfg.train.batch));
+    }
+    let mut loader = Loader::for_run(&cfg, real.clone(), synthetic, input as u32);
     if st.epoch == 0 {
         super::batch_plots::write_train_batches(&run_dir, &cfg, &loader, &split.train)?;
     }
     let (mut train_imgs, mut train_secs) = (0usize, 0f64);
     let guard_names: Vec<&str> = loss_names.iter().copied().chain(["total"]).collect();
     let mut guard = DivergenceGuard::new(&guard_names);
+    let resumed_at = st.epoch;
     for epoch in st.epoch..cfg.train.epochs {
+        let labelled = match &selftrain {
+            Some(s) => {
+                let here = resume.is_some() && epoch == resumed_at;
+                s.before_epoch(&cfg, epoch, here, &st, &mut loader, &base, &say)?
+            }
+            None => None,
+        };
         let te = Instant::now();
         let steps = run_epoch(
             &cfg,
@@ -111,6 +124,15 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
             opts.quiet,
         )?;
         train_imgs += steps.images;
+        if let Some(s) = &mut selftrain {
+            s.record(
+                &run_dir,
+                epoch,
+                loader.pseudo.as_ref(),
+                labelled,
+                steps.pseudo_items,
+            )?;
+        }
         if let Some(step) = steps.interrupted {
             return Err(run.save_interrupted(&st, epoch, step));
         }
