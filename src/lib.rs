@@ -7,10 +7,10 @@
 //!
 //! | layer | modules |
 //! |---|---|
-//! | foundation | [`util`], [`weights`] (PyTorch / safetensors files as host state dicts), [`config`], [`annotations`] (COCO, masks, LabelMe, splits) |
+//! | foundation | [`util`], [`weights`] (PyTorch / safetensors files as host state dicts), [`config`], [`annotations`] (COCO, masks, LabelMe, splits, the ground truth [`annotations::targets`]) |
+//! | models | [`model`] (YOLO-seg, Mask R-CNN, Mask2Former; read `annotations::targets`, import only the foundation) |
 //! | renderer | [`render`] (writes COCO through `annotations`) |
-//! | loader | [`data`] (real + rendered samples, augmentation, batches, [`data::targets`]) |
-//! | models | [`model`] (YOLO-seg, Mask R-CNN, Mask2Former; read `data::targets`) |
+//! | loader | [`data`] (real + rendered samples, augmentation, batches of `annotations::targets`) |
 //! | evaluator | [`eval`] (pycocotools-exact; reads only `annotations`) |
 //! | inference | [`infer`] (the trained-model wrapper, checkpoints, validation, TTA, predict) |
 //! | export | [`export`] (ONNX, safetensors) |

@@ -21,9 +21,9 @@ use std::path::{Path, PathBuf};
 /// be acyclic (checked separately).
 const LAYERS: &[(&str, &[&str])] = &[
     ("foundation", &["util", "weights", "config", "annotations"]),
+    ("models", &["model"]),
     ("renderer", &["render"]),
     ("loader", &["data"]),
-    ("models", &["model"]),
     ("evaluator", &["eval"]),
     ("inference", &["infer"]),
     ("export", &["export"]),

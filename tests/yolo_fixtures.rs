@@ -6,7 +6,7 @@
 //! the JSON.
 
 use burn::tensor::{Device, Tensor, TensorData};
-use chicktrain::data::targets::{ImageTargets, Targets};
+use chicktrain::annotations::targets::{ImageTargets, Targets};
 use chicktrain::model::yolo::assigner::{assign_image, ciou, AssignerConfig};
 use chicktrain::model::yolo::loss::{ciou_tensor, yolo_loss, LossWeights};
 use chicktrain::model::yolo::{AnchorGrid, YoloOutput};

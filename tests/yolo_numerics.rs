@@ -3,7 +3,7 @@
 //! zero-height / zero-area boxes, and saturated logits (±1e4) in every head output.
 
 use burn::tensor::{Device, Distribution, Tensor};
-use chicktrain::data::targets::{ImageTargets, Targets};
+use chicktrain::annotations::targets::{ImageTargets, Targets};
 use chicktrain::model::yolo::loss::{yolo_loss, LossWeights};
 use chicktrain::model::yolo::{AnchorGrid, YoloOutput};
 

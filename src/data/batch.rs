@@ -7,7 +7,7 @@
 
 use anyhow::{bail, Result};
 
-use crate::data::targets::{ImageTargets, Targets};
+use crate::annotations::targets::{ImageTargets, Targets};
 
 use super::dataset::Sample;
 use crate::annotations::mask::Mask;

@@ -14,8 +14,9 @@
 //!   (the first N stages of either family).
 //! - [`onnx`]: the ONNX graph writer and the tract engine that runs exported files.
 //!
-//! Models read their ground truth as [`crate::data::targets::Targets`] and nothing of the
-//! trainer: every model is built from its own typed config.
+//! Models read their ground truth as [`crate::annotations::targets::Targets`] and import
+//! nothing of the renderer, the loader or the trainer (only the foundation): every model is
+//! built from its own typed config.
 
 pub mod detection;
 pub mod freeze;

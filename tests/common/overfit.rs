@@ -7,7 +7,7 @@ use chicktrain::annotations::coco::{
 };
 use chicktrain::annotations::mask::Mask;
 use chicktrain::annotations::rle::Rle;
-use chicktrain::data::targets::ImageTargets;
+use chicktrain::annotations::targets::ImageTargets;
 use chicktrain::model::detection::Detection;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -17,7 +17,7 @@ use rand::Rng;
 
 use super::matcher::{cost_matrix, match_queries, CostWeights};
 use super::point_sample::{importance_points, sample_host, sample_mask, uniform_points, PointTaps};
-use crate::data::targets::ImageTargets;
+use crate::annotations::targets::ImageTargets;
 use crate::model::loss::{bce_with_logits, log_softmax_stable};
 use crate::util::tensor::{host, to_host};
 

@@ -33,8 +33,8 @@ use burn::tensor::{Device, Tensor};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::annotations::targets::ImageTargets;
 use crate::config::{Mask2FormerModelConfig, Mask2FormerPreset};
-use crate::data::targets::ImageTargets;
 use crate::model::detection::Detection;
 use crate::model::maskrcnn::resnet::{self, ResNet};
 use crate::model::maskrcnn::{PIXEL_MEAN, PIXEL_STD};

@@ -35,8 +35,8 @@ use burn::tensor::{Device, Tensor};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
+pub use crate::annotations::targets::ImageTargets;
 use crate::config::{MaskRcnnModelConfig, MaskRcnnPreset};
-pub use crate::data::targets::ImageTargets;
 pub use crate::model::detection::Detection;
 use crate::model::instance_mask::MaskSource;
 pub use crate::model::summary::ModelSummary;

@@ -24,7 +24,7 @@ use super::matcher::{pairwise_iou, Matcher};
 use super::roi_align::index_tensor;
 use super::rpn::Proposal;
 use super::sampler::subsample_labels;
-use crate::data::targets::ImageTargets;
+use crate::annotations::targets::ImageTargets;
 use crate::model::detection::nms;
 use crate::util::tensor::{host, to_host};
 

@@ -21,7 +21,7 @@ use super::losses::{bce_with_logits, smooth_l1};
 use super::matcher::{pairwise_iou, Matcher, NEGATIVE, POSITIVE};
 use super::roi_align::index_tensor;
 use super::sampler::subsample_labels;
-use crate::data::targets::ImageTargets;
+use crate::annotations::targets::ImageTargets;
 use crate::model::detection::nms;
 use crate::model::layers::conv_macs;
 use crate::util::tensor::{host, to_host};

@@ -17,7 +17,7 @@ use burn::tensor::{Device, FloatDType, Int, Tensor, TensorData};
 use super::assigner::{assign_image, AssignerConfig, ImageAssignment};
 use super::head::REG_MAX;
 use super::YoloOutput;
-use crate::data::targets::{ImageTargets, Targets};
+use crate::annotations::targets::{ImageTargets, Targets};
 use crate::util::tensor::{host, scalar, to_host};
 
 /// Loss gains (ultralytics hyp `box`, `cls`, `dfl`; the mask loss uses the `box` gain there).

@@ -1,6 +1,7 @@
 //! The ground truth the loader hands to every model family: per image, boxes (xyxy in
 //! input pixels), class indices and instance masks at the network input size. Host data,
-//! no tensors: each model moves what it needs to its device.
+//! no tensors: each model moves what it needs to its device. It sits in the foundation, not
+//! in `data/`, so that the models import nothing of the loader (issue 40).
 
 /// Ground truth of one image. Masks are row-major `H × W` at the network input size,
 /// non-zero inside the instance; pixels shared by several instances go to the smaller one.
