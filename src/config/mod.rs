@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 
 mod data;
 mod model;
+mod negatives;
 mod randomize;
 mod shipped;
 mod train;
@@ -24,6 +25,7 @@ pub use model::{
     Mask2FormerModelConfig, Mask2FormerPreset, MaskRcnnModelConfig, MaskRcnnPreset, ModelConfig,
     ModelKind, YoloModelConfig, YoloScale,
 };
+pub use negatives::Negatives;
 pub use randomize::Randomize;
 pub use shipped::SHIPPED;
 pub use train::{OptimizerKind, Precision, ScheduleKind, TrainConfig};
