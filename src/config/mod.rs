@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 
 mod data;
 mod model;
+mod negatives;
 mod randomize;
 mod self_training;
 mod shipped;
@@ -25,6 +26,7 @@ pub use model::{
     Mask2FormerModelConfig, Mask2FormerPreset, MaskRcnnModelConfig, MaskRcnnPreset, ModelConfig,
     ModelKind, YoloModelConfig, YoloScale,
 };
+pub use negatives::Negatives;
 pub use randomize::Randomize;
 pub use self_training::{SelfTrainingConfig, Teacher, UnlabeledConfig};
 pub use shipped::SHIPPED;
