@@ -22,7 +22,7 @@ fn main() -> anyhow::Result<()> {
         chicktrain::render::family::Family::prepare_all();
     }
     let prep = t.elapsed();
-    let report = chicktrain::render::bench_render(&opts, images, 0)?;
+    let report = chicktrain::render::bench::bench_render(&opts, images, 0)?;
     println!("groups {groups}: family meshes {prep:.2?}; {report}");
     Ok(())
 }

@@ -15,7 +15,7 @@
 //! | inference | [`infer`] (the trained-model wrapper, checkpoints, validation, TTA, predict) |
 //! | export | [`export`] (ONNX, safetensors) |
 //! | trainer | [`train`] (loop, optimiser, EMA, run files) |
-//! | on top | [`bench`] (timings, ablations), [`experiments`] (the paper's sweep), [`commands`] (every CLI command) |
+//! | on top | [`bench`] (timings), [`experiments`] (sweep, ablation, transfer: studies on one runner), [`commands`] (every CLI command) |
 //!
 //! The binary in `main.rs` only parses arguments and calls [`commands`].
 //!

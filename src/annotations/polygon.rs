@@ -91,10 +91,19 @@ pub fn rle_from_polygon(xy: &[f64], height: u32, width: u32) -> Rle {
         bx.push(xd as i32);
         by.push(yd as i32);
     }
-    // Run lengths from the sorted boundary positions.
+    Rle {
+        height,
+        width,
+        counts: runs_from_boundary(&bx, &by, h, w),
+    }
+}
+
+/// `rleFrPoly`'s last step: run lengths (column-major) from the boundary points where the
+/// mask switches, the sorted positions differenced and zero-length runs merged.
+fn runs_from_boundary(bx: &[i32], by: &[i32], h: i64, w: i64) -> Vec<u32> {
     let mut a: Vec<u32> = bx
         .iter()
-        .zip(&by)
+        .zip(by)
         .map(|(&px, &py)| px.wrapping_mul(h as i32).wrapping_add(py) as u32)
         .collect();
     a.push((h * w) as u32);
@@ -122,11 +131,7 @@ pub fn rle_from_polygon(xy: &[f64], height: u32, width: u32) -> Rle {
             }
         }
     }
-    Rle {
-        height,
-        width,
-        counts: b,
-    }
+    b
 }
 
 /// `rleFrBbox`: the mask of an [x, y, w, h] box, through the polygon rasteriser (here,

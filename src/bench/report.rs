@@ -222,7 +222,7 @@ fn write_ap_vs_train_time_png(out: &Path, with_ap: &[&Row]) -> Result<()> {
 
 /// The finished report's table plus where its files are: what `bench models` and
 /// `bench ablation` print last.
-pub(super) fn finished_report(out: &Path) -> Result<String> {
+pub fn finished_report(out: &Path) -> Result<String> {
     let md = std::fs::read_to_string(out.join("bench.md"))?;
     Ok(format!(
         "{md}\nwrote bench.csv, bench.md and plots in {}",

@@ -14,6 +14,11 @@ use crate::infer::device::device_of;
 use super::measure::{measure, Effort, Measurement};
 use super::variant::Variant;
 
+/// This binary, which runs the per-row worker processes.
+pub fn this_exe() -> Result<std::path::PathBuf> {
+    std::env::current_exe().map_err(|e| anyhow::anyhow!("cannot locate this binary: {e}"))
+}
+
 /// `bench model-worker`: measures one (variant, size) and returns its JSON line.
 pub fn worker(variant: &str, size: usize, e: Effort, device: DeviceKind) -> Result<String> {
     let v: Variant = variant.parse()?;

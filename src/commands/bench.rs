@@ -1,58 +1,25 @@
-//! The measurement commands: `bench models`, `bench engines`, `bench ablation`, `bench transfer`, the hidden per-row
-//! `bench model-worker`, and the paper's experiment `sweep`. Defaults that depend on
-//! several flags at once (which grid, which folder) are decided here, not in `main`.
+//! The measurement commands: `bench models`, `bench engines`, `bench loader` and the
+//! hidden per-row `bench model-worker`. The training studies (`sweep`, `bench ablation`,
+//! `bench transfer`) take their flags straight from `experiments/`, whose option structs
+//! derive clap's `Args`. Defaults that depend on several flags at once (which grid, which
+//! folder) are decided here, not in `main`.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 
-use crate::bench::ablation::{ablation, AblationOptions};
+use crate::bench::effort::EffortFlags;
 use crate::bench::engines::bench_engines;
 use crate::bench::measure::Effort;
 use crate::bench::models as bm;
 use crate::bench::models::parse_sizes;
-use crate::bench::transfer::{transfer, TransferOptions};
 use crate::bench::variant::Variant;
-use crate::bench::worker::worker;
+use crate::bench::worker::{this_exe, worker};
 use crate::config::{self, DeviceKind};
 /// `chicktrain sweep` is the experiment itself: [`sweep`] over [`SweepOptions`], the
 /// counts parsed by [`parse_counts`].
 pub use crate::experiments::sweep::{parse_counts, sweep, SweepOptions};
 use crate::util::all_cores;
-
-/// Per-row effort flags of `bench models` / `bench ablation`; unset ones keep the base
-/// (the defaults of [`Effort`], or `--quick`'s).
-#[derive(Clone, Copy, Debug, Default, clap::Args)]
-pub struct EffortFlags {
-    /// Untimed batch-1 runs before the timed ones [default: 3].
-    #[arg(long)]
-    pub warmup: Option<usize>,
-    /// Timed batch-1 inference runs; median, p10, p90 reported [default: 30].
-    #[arg(long)]
-    pub repeats: Option<usize>,
-    /// Training batch size of the throughput column [default: 8].
-    #[arg(long)]
-    pub train_batch: Option<usize>,
-    /// Timed training steps, after one warm-up step [default: 3].
-    #[arg(long)]
-    pub train_steps: Option<usize>,
-}
-
-impl EffortFlags {
-    pub fn over(self, base: Effort) -> Effort {
-        Effort {
-            warmup: self.warmup.unwrap_or(base.warmup),
-            repeats: self.repeats.unwrap_or(base.repeats),
-            train_batch: self.train_batch.unwrap_or(base.train_batch),
-            train_steps: self.train_steps.unwrap_or(base.train_steps),
-        }
-    }
-}
-
-/// The binary that runs the per-row worker processes.
-fn this_exe() -> Result<PathBuf> {
-    std::env::current_exe().map_err(|e| anyhow::anyhow!("cannot locate this binary: {e}"))
-}
 
 /// `bench models` as given on the command line.
 #[derive(Clone, Debug, clap::Args)]
@@ -127,123 +94,6 @@ pub fn models(r: ModelsRequest) -> Result<String> {
         .out
         .unwrap_or_else(|| PathBuf::from("runs/bench").join(name));
     bm::bench_models(&o, r.quiet)
-}
-
-/// `bench ablation` as given on the command line.
-#[derive(Clone, Debug, clap::Args)]
-pub struct AblationRequest {
-    /// Base config file, or the name of a shipped config.
-    #[arg(long, default_value = "cpu_protocol.toml")]
-    pub config: String,
-    /// Synthetic images added to the real training set of every variant.
-    #[arg(long = "syn", default_value_t = 50)]
-    pub synthetic: usize,
-    /// Override a config key in every variant (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub overrides: Vec<String>,
-    /// Comma-separated subset of: base, no_p3, no_c2psa, width_0.5, protos_16, px192, px320.
-    #[arg(long)]
-    pub variants: Option<String>,
-    /// Report folder (default: runs/ablation/<config name>/).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Only train the missing runs (no timing).
-    #[arg(long)]
-    pub train_only: bool,
-    /// Never train: time every variant; AP where a finished run exists.
-    #[arg(long)]
-    pub no_train: bool,
-    #[command(flatten)]
-    pub effort: EffortFlags,
-    /// Device of training and timing: flex, ndarray, cuda[:N] or wgpu.
-    #[arg(long, default_value = "flex")]
-    pub device: DeviceKind,
-    /// No progress bars or per-epoch lines.
-    #[arg(long)]
-    pub quiet: bool,
-}
-
-/// `chicktrain bench ablation` (report in `runs/ablation/<config name>/` by default).
-pub fn ablation_cmd(r: AblationRequest) -> Result<String> {
-    let name = config::load(&r.config, &r.overrides)?.name;
-    ablation(&AblationOptions {
-        config: r.config,
-        synthetic: r.synthetic,
-        overrides: r.overrides,
-        only: r
-            .variants
-            .map(|v| v.split(',').map(|s| s.trim().to_string()).collect())
-            .unwrap_or_default(),
-        out: r
-            .out
-            .unwrap_or_else(|| PathBuf::from("runs/ablation").join(name)),
-        train_only: r.train_only,
-        no_train: r.no_train,
-        effort: r.effort.over(Effort::default()),
-        device: r.device,
-        exe: this_exe()?,
-        quiet: r.quiet,
-    })
-}
-
-/// `bench transfer` as given on the command line.
-#[derive(Clone, Debug, clap::Args)]
-pub struct TransferRequest {
-    /// Base config file, or the name of a shipped config.
-    #[arg(long)]
-    pub config: String,
-    /// Data config of the set to score on, every image test (e.g.
-    /// bench/crossdomain/crossdomain.toml).
-    #[arg(long)]
-    pub data_eval: String,
-    /// Seeds per variant (config seed, seed + 1, …).
-    #[arg(long, default_value_t = 1)]
-    pub seeds: usize,
-    /// Comma-separated subset, e.g. base,no-lighting,no-mosaic (default: all of
-    /// base, no-<group> per randomisation group on, no-<aug> per augmentation on).
-    #[arg(long)]
-    pub variants: Option<String>,
-    /// Override a config key in every run (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub overrides: Vec<String>,
-    /// Report folder (default: runs/transfer/<config name>/).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Never train: score and report the finished runs, name the missing ones.
-    #[arg(long)]
-    pub no_train: bool,
-    /// Override the configs' device: flex, ndarray, cuda[:N] or wgpu.
-    #[arg(long)]
-    pub device: Option<DeviceKind>,
-    /// No progress bars or per-epoch lines.
-    #[arg(long)]
-    pub quiet: bool,
-}
-
-/// `chicktrain bench transfer` (report in `runs/transfer/<config name>/` by default).
-pub fn transfer_cmd(r: TransferRequest) -> Result<String> {
-    let name = config::load(&r.config, &r.overrides)?.name;
-    transfer(&TransferOptions {
-        config: r.config,
-        data_eval: r.data_eval,
-        seeds: r.seeds,
-        only: r
-            .variants
-            .map(|v| {
-                v.split(',')
-                    .map(|s| s.trim().to_string())
-                    .filter(|s| !s.is_empty())
-                    .collect()
-            })
-            .unwrap_or_default(),
-        overrides: r.overrides,
-        out: r
-            .out
-            .unwrap_or_else(|| PathBuf::from("runs/transfer").join(name)),
-        no_train: r.no_train,
-        device: r.device,
-        quiet: r.quiet,
-    })
 }
 
 /// `bench loader` as given on the command line.

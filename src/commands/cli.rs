@@ -5,10 +5,7 @@
 
 use clap::{Args, Parser, Subcommand};
 
-use super::bench::{
-    self as bench_cmd, AblationRequest, LoaderRequest, ModelsRequest, TransferRequest,
-    WorkerRequest,
-};
+use super::bench::{self as bench_cmd, LoaderRequest, ModelsRequest, WorkerRequest};
 use super::bench::{bench_engines_cmd, EnginesRequest};
 use super::data::{
     self, BenchCocoRequest, BenchRenderRequest, Coco2yoloRequest, CocoEvalRequest, LabelmeRequest,
@@ -17,7 +14,9 @@ use super::data::{
 use super::eval::{eval_cmd, EvalRequest};
 use super::export::{export_cmd, ExportRequest};
 use super::predict::{predict, PredictRequest};
+use crate::experiments::ablation::{ablation, AblationOptions};
 use crate::experiments::sweep::{sweep, SweepOptions};
+use crate::experiments::transfer::{transfer, TransferOptions};
 use crate::train::trainer::TrainOptions;
 
 /// Train instance segmentation of chicken carcass piles from real + rendered images.
@@ -98,11 +97,11 @@ pub enum BenchWhat {
     Engines(EnginesRequest),
     /// Scene ablation: train one variant per dropped/shrunk model option, report test AP
     /// vs latency and a recommended default (runs/ablation/<config name>/).
-    Ablation(AblationRequest),
+    Ablation(AblationOptions),
     /// Transfer ablation: train the base config and one variant per randomisation group
     /// and per augmentation turned off, N seeds each at the same optimiser steps, score
     /// every best.bpk on an external set, report mean ± std (runs/transfer/<config name>/).
-    Transfer(TransferRequest),
+    Transfer(TransferOptions),
     /// One (variant, size) measurement as a JSON line (what `bench models` runs per row).
     #[command(hide = true)]
     ModelWorker(WorkerRequest),
@@ -156,8 +155,8 @@ impl BenchWhat {
         match self {
             BenchWhat::Models(r) => bench_cmd::models(r),
             BenchWhat::Engines(r) => bench_engines_cmd(&r),
-            BenchWhat::Ablation(r) => bench_cmd::ablation_cmd(r),
-            BenchWhat::Transfer(r) => bench_cmd::transfer_cmd(r),
+            BenchWhat::Ablation(r) => ablation(&r),
+            BenchWhat::Transfer(r) => transfer(&r),
             BenchWhat::ModelWorker(r) => bench_cmd::model_worker(&r),
             BenchWhat::Render(r) => data::bench_render(&r),
             BenchWhat::Loader(r) => bench_cmd::loader_cmd(&r),

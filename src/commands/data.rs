@@ -223,7 +223,7 @@ pub fn render(r: &RenderRequest) -> Result<String> {
     opts.count = count;
     opts.seed = r.scene.seed;
     opts.carcass = r.carcass.clone();
-    crate::render::render_dataset(&opts, out, true)?;
+    crate::render::dataset::render_dataset(&opts, out, true)?;
     let proxy = if opts.is_proxy() {
         " (proxy-real: a rendered stand-in for real photos, not real data)"
     } else {
@@ -249,7 +249,7 @@ pub struct BenchRenderRequest {
 pub fn bench_render(r: &BenchRenderRequest) -> Result<String> {
     let s = &r.scene;
     let opts = preset_with(&s.preset, s.size, &s.randomize)?;
-    Ok(crate::render::bench_render(&opts, r.images, s.seed)?.to_string())
+    Ok(crate::render::bench::bench_render(&opts, r.images, s.seed)?.to_string())
 }
 
 #[cfg(test)]

@@ -259,24 +259,7 @@ impl TrainConfig {
             bail!("train.steps_per_epoch = 0 must be at least 1 (or left out: every item once per epoch)");
         }
         if let Some(f) = t.real_fraction {
-            if !(0.0..=1.0).contains(&f) {
-                bail!("train.real_fraction = {f} must be in [0, 1] (the share of real images in a batch)");
-            }
-            let n = (f * t.batch as f64).round() as usize;
-            if f > 0.0 && n == 0 {
-                bail!(
-                    "train.real_fraction = {f} × train.batch = {} rounds to 0 real images per batch (raise it to at least {:.3}, or set 0 for synthetic only)",
-                    t.batch,
-                    0.5 / t.batch as f64
-                );
-            }
-            if f < 1.0 && n == t.batch {
-                bail!(
-                    "train.real_fraction = {f} × train.batch = {} rounds to a batch of only real images (lower it to at most {:.3}, or set 1 for real only)",
-                    t.batch,
-                    1.0 - 0.5 / t.batch as f64
-                );
-            }
+            t.validate_real_fraction(f)?;
         }
         if !(t.degrees.is_finite() && (0.0..=180.0).contains(&t.degrees)) {
             bail!(
@@ -307,6 +290,32 @@ impl TrainConfig {
         }
         if t.milestones.windows(2).any(|w| w[0] >= w[1]) {
             bail!("train.milestones = {:?} must be increasing", t.milestones);
+        }
+        Ok(())
+    }
+
+    /// `train.real_fraction = f`: a share in [0, 1] that leaves both kinds of image in a
+    /// batch of `train.batch` (unless it is 0 or 1).
+    fn validate_real_fraction(&self, f: f64) -> Result<()> {
+        if !(0.0..=1.0).contains(&f) {
+            bail!(
+                "train.real_fraction = {f} must be in [0, 1] (the share of real images in a batch)"
+            );
+        }
+        let n = (f * self.batch as f64).round() as usize;
+        if f > 0.0 && n == 0 {
+            bail!(
+                "train.real_fraction = {f} × train.batch = {} rounds to 0 real images per batch (raise it to at least {:.3}, or set 0 for synthetic only)",
+                self.batch,
+                0.5 / self.batch as f64
+            );
+        }
+        if f < 1.0 && n == self.batch {
+            bail!(
+                "train.real_fraction = {f} × train.batch = {} rounds to a batch of only real images (lower it to at most {:.3}, or set 1 for real only)",
+                self.batch,
+                1.0 - 0.5 / self.batch as f64
+            );
         }
         Ok(())
     }

@@ -1,5 +1,9 @@
 //! The COCO evaluator, reproducing pycocotools 2.0.11's `COCOeval` bit for bit.
 //!
+//! One concept: pycocotools' `COCOeval` (`loadRes`, `evaluateImg`, `accumulate`,
+//! `summarize`), kept in one file as `cocoeval.py` keeps it in one class, so that the two
+//! read side by side.
+//!
 //! Every epoch's metrics, every bench row and every claim against the paper go through
 //! this file, so it follows `cocoeval.py` step by step rather than re-deriving mAP:
 //! `loadRes` (box area for results that carry a box, ids from 1), `evaluateImg` (stable

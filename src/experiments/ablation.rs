@@ -5,23 +5,24 @@
 //! models`; the report is AP vs latency with the Pareto front, and a recommendation: the
 //! fastest variant whose test segm AP is within [`AP_TOLERANCE`] of the best.
 //!
-//! Trainings are deterministic, so their AP holds on a loaded machine; only the timings
-//! need a quiet one (`--no-train` re-times finished runs without training).
+//! A study on [`super::runner`] (one seed per variant, folder `<variant>/`). Trainings
+//! are deterministic, so their AP holds on a loaded machine; only the timings need a quiet
+//! one (`--no-train` re-times finished runs without training).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 
-use crate::config::{self, Config, DeviceKind};
-use crate::infer::checkpoint::Checkpoint;
+use crate::bench::accuracy::run_accuracy;
+use crate::bench::effort::EffortFlags;
+use crate::bench::measure::Effort;
+use crate::bench::report::{finished_report, write_report, Row};
+use crate::bench::variant::Variant as ModelVariant;
+use crate::bench::worker::{measure_in_child, this_exe};
+use crate::config::{self, DeviceKind};
 use crate::infer::detector::DetectorConfig;
-use crate::train::trainer::{train, TrainOptions};
 
-use super::accuracy::run_accuracy;
-use super::measure::Effort;
-use super::report::{finished_report, write_report, Row};
-use super::variant::Variant;
-use super::worker::measure_in_child;
+use super::runner::{choose, variant_names, Run, State, Study, StudyFlags, Variant};
 
 /// One ablation variant: a name (its run folder), what it changes, the `--set` overrides.
 pub struct AblationVariant {
@@ -73,23 +74,28 @@ pub const VARIANTS: [AblationVariant; 7] = [
 /// A variant may lose this much test segm AP against the best and still be recommended.
 pub const AP_TOLERANCE: f64 = 0.01;
 
-/// Options of `bench ablation`.
-#[derive(Clone, Debug)]
+/// `bench ablation`'s flags.
+#[derive(Clone, Debug, clap::Args)]
 pub struct AblationOptions {
+    /// Base config file, or the name of a shipped config.
+    #[arg(long, default_value = "cpu_protocol.toml")]
     pub config: String,
+    /// Synthetic images added to the real training set of every variant.
+    #[arg(long = "syn", default_value_t = 50)]
     pub synthetic: usize,
-    pub overrides: Vec<String>,
-    /// Variant names to run (all when empty).
-    pub only: Vec<String>,
-    pub out: PathBuf,
-    /// Train missing runs, skip the timing.
+    /// Comma-separated subset of: base, no_p3, no_c2psa, width_0.5, protos_16, px192, px320.
+    #[arg(long)]
+    pub variants: Option<String>,
+    #[command(flatten)]
+    pub study: StudyFlags,
+    /// Only train the missing runs (no timing).
+    #[arg(long)]
     pub train_only: bool,
-    /// Never train: time every variant, AP only where a finished run exists.
-    pub no_train: bool,
-    pub effort: Effort,
+    #[command(flatten)]
+    pub effort: EffortFlags,
+    /// Device of training and timing: flex, ndarray, cuda[:N] or wgpu.
+    #[arg(long, default_value = "flex")]
     pub device: DeviceKind,
-    pub exe: PathBuf,
-    pub quiet: bool,
 }
 
 /// The fastest row whose segm AP is within `tol` of the best (rows without AP ignored).
@@ -108,123 +114,99 @@ pub fn recommend(rows: &[Row], tol: f64) -> Option<usize> {
         .min_by(|&a, &b| rows[a].m.latency_ms[0].total_cmp(&rows[b].m.latency_ms[0]))
 }
 
-/// `chicktrain bench ablation`.
-pub fn ablation(o: &AblationOptions) -> Result<String> {
-    if o.train_only && o.no_train {
-        bail!("--train-only and --no-train exclude each other");
-    }
-    let chosen = chosen_variants(&o.only)?;
-    std::fs::create_dir_all(&o.out)
-        .with_context(|| format!("cannot create {}", o.out.display()))?;
-    crate::train::interrupt::install();
-    let mut rows = Vec::new();
-    let mut changes = Vec::new();
-    for v in &chosen {
-        if let Some((row, change)) = run_variant(o, v)? {
-            rows.push(row);
-            changes.push(change);
+impl AblationVariant {
+    /// As a variant of the study.
+    fn variant(&self) -> Variant {
+        Variant {
+            name: self.name.into(),
+            change: self.change.into(),
+            overrides: self.overrides.iter().map(|s| s.to_string()).collect(),
         }
     }
+}
+
+/// The ablation as a study: the chosen variants, one seed each, folder `<variant>/`.
+fn study(o: &AblationOptions) -> Result<Study> {
+    let all = VARIANTS.iter().map(AblationVariant::variant).collect();
+    let mut overrides = o.study.overrides.clone();
+    overrides.push(format!("data.synthetic={}", o.synthetic));
+    let name = config::load(&o.config, &o.study.overrides)?.name;
+    Ok(Study {
+        name: "ablation",
+        config: o.config.clone(),
+        overrides,
+        variants: choose("ablation", all, &variant_names(&o.variants), "")?,
+        seeds: 1,
+        folder: |v, _| v.to_string(),
+        out: o.study.out_or_default("ablation", &name),
+        no_train: o.study.no_train,
+        smoke: false,
+        device: Some(o.device),
+        quiet: o.study.quiet,
+    })
+}
+
+/// `chicktrain bench ablation`.
+pub fn ablation(o: &AblationOptions) -> Result<String> {
+    if o.train_only && o.study.no_train {
+        bail!("--train-only and --no-train exclude each other");
+    }
+    let study = study(o)?;
+    let runs = study.plan()?;
+    let out = &study.out;
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let exe = this_exe()?;
+    let effort = o.effort.over(Effort::default());
+    // Every variant is timed, trained or not (`--no-train`); none with `--train-only`.
+    let done = study.run(&runs, |r, state| {
+        if o.train_only {
+            return Ok(None);
+        }
+        time_run(&exe, effort, o.device, &study, r, state).map(Some)
+    })?;
     if o.train_only {
         return Ok(format!(
             "trained the ablation runs in {} (timings skipped: --train-only)",
-            o.out.display()
+            out.display()
         ));
     }
-    let mut pre = preamble(o, &changes);
+    let (rows, changes): (Vec<Row>, Vec<String>) = done.scores.into_iter().unzip();
+    let mut pre = preamble(o, effort, &changes);
     pre.push_str(&recommendation(&rows));
-    write_report(&o.out, &rows, &pre)?;
-    finished_report(&o.out)
+    write_report(out, &rows, &pre)?;
+    finished_report(out)
 }
 
-/// The variants named in `only` (all when empty), in [`VARIANTS`] order; an unknown
-/// name is an error listing the known ones.
-fn chosen_variants(only: &[String]) -> Result<Vec<&'static AblationVariant>> {
-    for n in only {
-        if !VARIANTS.iter().any(|v| v.name == n) {
-            let names: Vec<&str> = VARIANTS.iter().map(|v| v.name).collect();
-            bail!(
-                "unknown ablation variant {n:?} (known: {})",
-                names.join(", ")
-            );
-        }
-    }
-    Ok(VARIANTS
-        .iter()
-        .filter(|v| only.is_empty() || only.iter().any(|n| n == v.name))
-        .collect())
-}
-
-fn say(o: &AblationOptions, s: String) {
-    if !o.quiet {
-        eprintln!("{s}");
-    }
-}
-
-/// One variant: trains its run unless finished (or `--no-train`), then — unless
-/// `--train-only` — times it and returns its report row and its line of the change list.
-fn run_variant(o: &AblationOptions, v: &AblationVariant) -> Result<Option<(Row, String)>> {
-    let mut set = o.overrides.clone();
-    set.push(format!("data.synthetic={}", o.synthetic));
-    set.extend(v.overrides.iter().map(|s| s.to_string()));
-    let cfg =
-        config::load(&o.config, &set).with_context(|| format!("ablation variant {}", v.name))?;
-    let dir = o.out.join(v.name);
-    if !dir.join("test.json").exists() && !o.no_train {
-        train_run(o, v, &cfg, &dir)?;
-    }
-    if o.train_only {
-        return Ok(None);
-    }
-    let acc = if dir.join("test.json").exists() {
-        Some(run_accuracy(&dir)?)
-    } else {
-        None
+/// Times one variant's model in a fresh process, with its test AP when its run finished;
+/// returns its report row and its line of the change list.
+fn time_run(
+    exe: &Path,
+    effort: Effort,
+    device: DeviceKind,
+    study: &Study,
+    r: &Run,
+    state: State,
+) -> Result<(Row, String)> {
+    let v = &study.variants[r.variant];
+    let acc = match state {
+        State::Finished => Some(run_accuracy(&study.dir(r))?),
+        State::NotTrained => None,
     };
-    let mc = DetectorConfig::from_config(&cfg, 1)?;
-    let variant = Variant::of_detector(&mc);
+    let mc = DetectorConfig::from_config(&r.config, 1)?;
+    let variant = ModelVariant::of_detector(&mc);
     let size = mc.input_size();
-    say(
-        o,
-        format!("ablation: timing {} ({variant} at {size} px)", v.name),
-    );
-    let m = measure_in_child(&o.exe, &variant, size, o.effort, o.device)?;
+    study.say(&format!("timing {} ({variant} at {size} px)", v.name));
+    let m = measure_in_child(exe, &variant, size, effort, device)?;
     let row = Row {
-        label: v.name.to_string(),
+        label: v.name.clone(),
         m,
         acc,
     };
-    Ok(Some((
-        row,
-        format!("- `{}`: {} (`{variant}`)", v.name, v.change),
-    )))
-}
-
-/// Trains `v`'s run into `dir`, resuming its `last.bpk` when that stopped early.
-fn train_run(o: &AblationOptions, v: &AblationVariant, cfg: &Config, dir: &Path) -> Result<()> {
-    let last = dir.join("last.bpk");
-    let resume =
-        last.exists() && Checkpoint::load(&last).is_ok_and(|c| c.header.epoch < cfg.train.epochs);
-    say(
-        o,
-        format!("ablation: training {} → {}", v.name, dir.display()),
-    );
-    let opts = TrainOptions {
-        run_dir: Some(dir.to_path_buf()),
-        resume,
-        smoke: false,
-        device: Some(o.device),
-        quiet: o.quiet,
-        exist_ok: false,
-    };
-    train(cfg.clone(), &opts)
-        .with_context(|| format!("ablation variant {} ({})", v.name, dir.display()))?;
-    Ok(())
+    Ok((row, format!("- `{}`: {} (`{variant}`)", v.name, v.change)))
 }
 
 /// The report's opening: the config, the protocol, and the change list.
-fn preamble(o: &AblationOptions, changes: &[String]) -> String {
-    let e = o.effort;
+fn preamble(o: &AblationOptions, e: Effort, changes: &[String]) -> String {
     format!(
         "# Scene ablation\n\nConfig `{}` + {} synthetic{}, one option changed per variant; \
          AP on each run's test split (`best.bpk`). Latency: batch 1, {} warm-up + {} runs \
@@ -232,10 +214,10 @@ fn preamble(o: &AblationOptions, changes: &[String]) -> String {
          variant.\n\n{}",
         o.config,
         o.synthetic,
-        if o.overrides.is_empty() {
+        if o.study.overrides.is_empty() {
             String::new()
         } else {
-            format!(", `--set {}`", o.overrides.join(" --set "))
+            format!(", `--set {}`", o.study.overrides.join(" --set "))
         },
         e.warmup,
         e.repeats,
@@ -277,9 +259,9 @@ fn recommendation(rows: &[Row]) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::super::accuracy::Accuracy;
-    use super::super::measure::Measurement;
     use super::*;
+    use crate::bench::accuracy::Accuracy;
+    use crate::bench::measure::Measurement;
 
     fn row(label: &str, ms: f64, ap: Option<f64>) -> Row {
         Row {
@@ -325,5 +307,38 @@ mod tests {
             let set: Vec<String> = v.overrides.iter().map(|s| s.to_string()).collect();
             config::load("cpu_protocol.toml", &set).unwrap();
         }
+    }
+
+    #[test]
+    fn the_study_is_the_chosen_variants_in_order_one_seed_each() {
+        let o = AblationOptions {
+            config: "cpu_protocol.toml".into(),
+            synthetic: 7,
+            variants: Some("px192,base".into()),
+            study: StudyFlags {
+                overrides: vec!["seed=3".into()],
+                out: None,
+                no_train: true,
+                quiet: true,
+            },
+            train_only: false,
+            effort: EffortFlags::default(),
+            device: DeviceKind::Flex,
+        };
+        let s = study(&o).unwrap();
+        let runs = s.plan().unwrap();
+        let labels: Vec<&str> = runs.iter().map(|r| r.label.as_str()).collect();
+        assert_eq!(labels, ["base", "px192"]);
+        assert_eq!((runs[1].seed, runs[1].config.data.synthetic), (3, 7));
+        assert_eq!(runs[1].config.data.image_size, 192);
+        let name = config::load("cpu_protocol.toml", &[]).unwrap().name;
+        assert_eq!(s.out, Path::new("runs/ablation").join(name));
+        let e = study(&AblationOptions {
+            variants: Some("no_such".into()),
+            ..o
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("\"no_such\"") && e.contains("px320"), "{e}");
     }
 }

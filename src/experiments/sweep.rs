@@ -8,10 +8,10 @@
 //! segm AP, AP50, AP75 as mean and std; the best count per metric named under the
 //! markdown table) and `sweep.png` (AP vs synthetic count, ± std bars).
 //!
-//! Resumable: a setting whose folder already has `test.json` is read, not retrained; one
-//! with only `last.bpk` continues from it; `--no-train` reports what finished and names
-//! the rest, for a sweep whose seeds ran in separate processes. Seed `k` of a sweep is
-//! `seed + k`. That seed drives everything the config's seed drives — the proxy-real draw
+//! A study on [`super::runner`]: one variant per count. Resumable like every study there:
+//! a setting whose folder already has `test.json` is read, not retrained; one with only
+//! `last.bpk` continues from it; `--no-train` reports what finished and names the rest,
+//! for a sweep whose seeds ran in separate processes. Seed `k` of a sweep is `seed + k`. That seed drives everything the config's seed drives — the proxy-real draw
 //! and the split included — so with proxy-real data the spread over seeds also covers
 //! test-set variation, where the paper keeps one split and varies only training.
 
@@ -19,14 +19,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
-use crate::config::{self, DeviceKind};
+use crate::bench::accuracy::run_accuracy;
+use crate::config::DeviceKind;
 use crate::eval::plots::{write_png, Panel, Series, PALETTE};
-use crate::eval::report::{stat_cells, stat_columns, Table};
-use crate::infer::checkpoint::Checkpoint;
-use crate::train::run_files;
+use crate::eval::report::Table;
 use crate::train::smoke::smoke_config;
-use crate::train::trainer::{train, TrainOptions};
-use crate::util::stats::mean_std;
+
+use super::runner::{not_trained, State, Study, StudyFlags, Variant};
+use super::summary::{group, md_cell, mean_std_cells, mean_std_columns, runs_table, Group};
 
 /// What to sweep (`chicktrain sweep`'s flags).
 #[derive(Clone, Debug, clap::Args)]
@@ -41,26 +41,14 @@ pub struct SweepOptions {
     /// Seeds per count (config seed, seed + 1, …).
     #[arg(long, default_value_t = 1)]
     pub seeds: usize,
-    /// Override a config key in every run, e.g. --set train.epochs=20 (repeatable;
-    /// applied before the sweep's own two).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub overrides: Vec<String>,
+    #[command(flatten)]
+    pub study: StudyFlags,
     /// Shrink every run to a ~1 minute smoke run.
     #[arg(long)]
     pub smoke: bool,
-    /// Write the runs and the report here instead of runs/sweep/<name>/.
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Train nothing: report the finished runs in the output folder and name the
-    /// missing ones (for a sweep split over several processes or cut short).
-    #[arg(long)]
-    pub no_train: bool,
     /// Override the config's device: flex, ndarray, cuda[:N] or wgpu.
     #[arg(long)]
     pub device: Option<DeviceKind>,
-    /// No progress bars or per-epoch lines.
-    #[arg(long)]
-    pub quiet: bool,
 }
 
 /// [`parse_counts`] as clap's value parser of `--syn`.
@@ -100,13 +88,13 @@ pub fn parse_counts(s: &str) -> Result<Vec<usize>> {
 
 /// Reads a finished run folder: `test.json` and the epoch times of `metrics.jsonl`.
 pub fn read_run(dir: &Path, synthetic: usize, seed: u64) -> Result<RunResult> {
-    let t = run_files::read_test(dir)?;
+    let a = run_accuracy(dir)?;
     Ok(RunResult {
         synthetic,
         seed,
-        bbox: t.bbox.stats,
-        segm: t.segm.stats,
-        train_seconds: run_files::train_seconds(dir)?,
+        bbox: a.bbox,
+        segm: a.segm,
+        train_seconds: a.train_seconds,
     })
 }
 
@@ -128,30 +116,29 @@ fn metric(r: &RunResult, kind: &str, i: usize) -> f64 {
     }
 }
 
-/// One row per synthetic count: (count, runs, [(mean, std); 6], mean train seconds).
-pub type Summary = Vec<(usize, usize, [(f64, f64); 6], f64)>;
-
-pub fn summarise(results: &[RunResult]) -> Summary {
-    let mut counts: Vec<usize> = results.iter().map(|r| r.synthetic).collect();
-    counts.sort_unstable();
-    counts.dedup();
-    counts
-        .into_iter()
-        .map(|n| {
-            let rs: Vec<&RunResult> = results.iter().filter(|r| r.synthetic == n).collect();
-            let ms = METRICS
-                .map(|(_, k, i)| mean_std(&rs.iter().map(|r| metric(r, k, i)).collect::<Vec<_>>()));
-            let secs = mean_std(&rs.iter().map(|r| r.train_seconds).collect::<Vec<_>>()).0;
-            (n, rs.len(), ms, secs)
-        })
-        .collect()
+/// One row per synthetic count (ascending): its runs, [`METRICS`] then the training
+/// seconds as (mean, sample std).
+pub fn summarise(results: &[RunResult]) -> Vec<Group<usize>> {
+    let mut g = group(
+        results,
+        |r| r.synthetic,
+        |r| {
+            METRICS
+                .iter()
+                .map(|&(_, k, i)| metric(r, k, i))
+                .chain([r.train_seconds])
+                .collect()
+        },
+    );
+    g.sort_by_key(|g| g.key);
+    g
 }
 
 /// The best synthetic count per metric (highest mean; the smaller count on a tie).
-pub fn best_counts(s: &Summary) -> [(usize, f64); 6] {
+pub fn best_counts(s: &[Group<usize>]) -> [(usize, f64); 6] {
     std::array::from_fn(|j| {
         s.iter()
-            .map(|(n, _, ms, _)| (*n, ms[j].0))
+            .map(|g| (g.key, g.columns[j].0))
             .fold((usize::MAX, f64::NEG_INFINITY), |b, c| {
                 if c.1 > b.1 {
                     c
@@ -171,56 +158,45 @@ fn setting_name(n: usize) -> String {
 }
 
 /// Writes `runs.csv`, `sweep.csv`, `sweep.md` and `sweep.png` into `out`.
-pub fn write_report(out: &Path, results: &[RunResult], protocol: &str) -> Result<Summary> {
-    let mut runs = Table::new(
-        ["synthetic", "seed", "train_seconds"]
-            .into_iter()
-            .map(String::from)
-            .chain(stat_columns()),
+pub fn write_report(
+    out: &Path,
+    results: &[RunResult],
+    protocol: &str,
+) -> Result<Vec<Group<usize>>> {
+    let runs = runs_table(
+        &["synthetic", "seed", "train_seconds"],
+        results.iter().map(|r| {
+            let ids = vec![
+                r.synthetic.to_string(),
+                r.seed.to_string(),
+                format!("{:.1}", r.train_seconds),
+            ];
+            (ids, &r.bbox, &r.segm)
+        }),
     );
-    for r in results {
-        let mut row = vec![
-            r.synthetic.to_string(),
-            r.seed.to_string(),
-            format!("{:.1}", r.train_seconds),
-        ];
-        row.extend(stat_cells(&r.bbox, &r.segm));
-        runs.push(row);
-    }
     crate::util::write_atomic(&out.join("runs.csv"), runs.to_csv().as_bytes())?;
 
     let s = summarise(results);
+    let names = METRICS.map(|m| m.0);
     let mut csv = Table::new(
         ["synthetic", "runs", "train_minutes"]
             .into_iter()
             .map(String::from)
-            .chain(METRICS.iter().flat_map(|(n, _, _)| {
-                let n = n.replace(' ', "_");
-                [format!("{n}_mean"), format!("{n}_std")]
-            })),
+            .chain(mean_std_columns(&names)),
     );
     let mut md = Table::new(
         ["setting", "runs"]
             .into_iter()
-            .map(String::from)
-            .chain(METRICS.iter().map(|(n, _, _)| n.to_string()))
-            .chain(["train min".to_string()]),
+            .chain(names)
+            .chain(["train min"]),
     );
-    for (n, k, ms, secs) in &s {
+    for g in &s {
+        let (n, k, ms, secs) = (g.key, g.runs, &g.columns[..6], g.columns[6].0);
         let mut row = vec![n.to_string(), k.to_string(), format!("{:.2}", secs / 60.0)];
-        row.extend(
-            ms.iter()
-                .flat_map(|(m, sd)| [format!("{m:.4}"), format!("{sd:.4}")]),
-        );
+        row.extend(mean_std_cells(ms));
         csv.push(row);
-        let mut row = vec![setting_name(*n), k.to_string()];
-        row.extend(ms.iter().map(|(m, sd)| {
-            if *k > 1 {
-                format!("{m:.3} ± {sd:.3}")
-            } else {
-                format!("{m:.3}")
-            }
-        }));
+        let mut row = vec![setting_name(n), k.to_string()];
+        row.extend(ms.iter().map(|&m| md_cell(m, k)));
         row.push(format!("{:.1}", secs / 60.0));
         md.push(row);
     }
@@ -231,11 +207,16 @@ pub fn write_report(out: &Path, results: &[RunResult], protocol: &str) -> Result
         md.to_markdown()
     );
     text.push_str("Best synthetic count per metric (highest mean over seeds):\n\n");
-    for ((name, _, _), (n, v)) in METRICS.iter().zip(best) {
+    for (name, (n, v)) in names.iter().zip(best) {
         text.push_str(&format!("- {name}: {} ({v:.3})\n", setting_name(n)));
     }
     crate::util::write_atomic(&out.join("sweep.md"), text.as_bytes())?;
+    write_plot(out, &s)?;
+    Ok(s)
+}
 
+/// `sweep.png`: bbox and segm AP, AP50, AP75 against the synthetic count, ± std bars.
+fn write_plot(out: &Path, s: &[Group<usize>]) -> Result<()> {
     let panel = |kind: &str, j0: usize| {
         let mut p = Panel::new(
             format!("{kind}: test AP vs synthetic images"),
@@ -246,10 +227,10 @@ pub fn write_report(out: &Path, results: &[RunResult], protocol: &str) -> Result
             p = p.push(
                 Series::new(
                     METRICS[j].0,
-                    s.iter().map(|(n, _, ms, _)| (*n as f64, ms[j].0)).collect(),
+                    s.iter().map(|g| (g.key as f64, g.columns[j].0)).collect(),
                     PALETTE[c],
                 )
-                .err(s.iter().map(|(_, _, ms, _)| ms[j].1).collect()),
+                .err(s.iter().map(|g| g.columns[j].1).collect()),
             );
         }
         p
@@ -260,102 +241,55 @@ pub fn write_report(out: &Path, results: &[RunResult], protocol: &str) -> Result
         2,
         420,
         320,
-    )?;
-    Ok(s)
+    )
+}
+
+/// The sweep as a study: one variant per synthetic count (`syn<N>`, folders
+/// `syn<N>_seed<S>/`), in `out`.
+fn study(o: &SweepOptions, out: PathBuf) -> Study {
+    Study {
+        name: "sweep",
+        config: o.config.clone(),
+        overrides: o.study.overrides.clone(),
+        variants: o
+            .synthetic
+            .iter()
+            .map(|n| Variant {
+                name: format!("syn{n}"),
+                change: format!("data.synthetic = {n} (--syn {n})"),
+                overrides: vec![format!("data.synthetic={n}")],
+            })
+            .collect(),
+        seeds: o.seeds,
+        folder: |v, seed| format!("{v}_seed{seed}"),
+        out,
+        no_train: o.study.no_train,
+        smoke: o.smoke,
+        device: o.device,
+        quiet: o.study.quiet,
+    }
 }
 
 /// Runs (or reads back) every setting of the sweep and writes the report.
 pub fn sweep(o: &SweepOptions) -> Result<String> {
-    if o.seeds == 0 {
-        bail!("--seeds 0: a sweep needs at least one seed per setting");
-    }
-    if o.synthetic.is_empty() {
-        bail!("--syn names no synthetic-image count");
-    }
     // Each count's config is validated before anything trains, as it will run: with its
     // `data.synthetic` (a setting such as `train.real_fraction` needs synthetic images, so
     // the config as given may be invalid alone and valid for every count of the sweep).
-    // Each run is its count's config with the run's seed.
-    let mut per_count = Vec::new();
-    for &n in &o.synthetic {
-        let mut set = o.overrides.clone();
-        set.push(format!("data.synthetic={n}"));
-        per_count.push(
-            config::load(&o.config, &set)
-                .with_context(|| format!("--syn {n}: the config with data.synthetic = {n}"))?,
-        );
-    }
-    let base = &per_count[0];
-    let mut name = base.name.clone();
+    let mut study = study(o, PathBuf::new());
+    let runs = study.plan()?;
+    let mut c = runs[0].config.clone();
     if o.smoke {
-        let mut c = base.clone();
         smoke_config(&mut c);
-        name = c.name;
     }
-    let out = o
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("runs").join("sweep").join(&name));
-    if !o.no_train {
-        std::fs::create_dir_all(&out)
-            .with_context(|| format!("cannot create sweep folder {}", out.display()))?;
-    }
-    crate::train::interrupt::install();
-    let mut results = Vec::new();
-    let mut missing = Vec::new();
-    let total = o.synthetic.len() * o.seeds;
-    for (&n, count_cfg) in o.synthetic.iter().zip(&per_count) {
-        for k in 0..o.seeds as u64 {
-            let seed = base.seed + k;
-            let dir = out.join(format!("syn{n}_seed{seed}"));
-            let say = |s: String| {
-                if !o.quiet {
-                    eprintln!("{s}");
-                }
-            };
-            if dir.join("test.json").exists() {
-                say(format!("sweep: {} done, reading it", dir.display()));
-                results.push(read_run(&dir, n, seed)?);
-                continue;
-            }
-            if o.no_train {
-                missing.push(format!("syn{n}_seed{seed}"));
-                continue;
-            }
-            let mut cfg = count_cfg.clone();
-            cfg.seed = seed;
-            let last = dir.join("last.bpk");
-            let resume = last.exists()
-                && Checkpoint::load(&last).is_ok_and(|c| {
-                    let epochs = if o.smoke {
-                        cfg.train.epochs.min(2)
-                    } else {
-                        cfg.train.epochs
-                    };
-                    c.header.epoch < epochs
-                });
-            say(format!(
-                "sweep: run {}/{total}: {} synthetic, seed {seed}{} → {}",
-                results.len() + 1,
-                n,
-                if resume { " (resuming)" } else { "" },
-                dir.display()
-            ));
-            let opts = TrainOptions {
-                run_dir: Some(dir.clone()),
-                resume,
-                smoke: o.smoke,
-                device: o.device,
-                quiet: o.quiet,
-                exist_ok: false,
-            };
-            train(cfg, &opts).with_context(|| {
-                format!("sweep run {n} synthetic, seed {seed} ({})", dir.display())
-            })?;
-            results.push(read_run(&dir, n, seed)?);
-        }
-    }
-    if results.is_empty() {
+    study.out = o.study.out_or_default("sweep", &c.name);
+    let done = study.run(&runs, |r, state| {
+        Ok(match state {
+            State::Finished => Some(read_run(&study.dir(r), o.synthetic[r.variant], r.seed)?),
+            State::NotTrained => None,
+        })
+    })?;
+    let out = &study.out;
+    if done.scores.is_empty() {
         bail!(
             "--no-train: no finished run (a folder with test.json) in {} for --syn {} --seeds {}",
             out.display(),
@@ -367,28 +301,20 @@ pub fn sweep(o: &SweepOptions) -> Result<String> {
             o.seeds
         );
     }
+    let (first, last) = Study::seed_range(&runs);
     let mut protocol = format!(
-        "Config `{}`{}{}; {} seed(s) per setting (seed {}…{}); test split of each run, \
+        "{}{}; {} seed(s) per setting (seed {first}…{last}); test split of each run, \
          `best.bpk` (best val segm AP). Runs: `{}`.",
-        o.config,
-        if o.overrides.is_empty() {
-            String::new()
-        } else {
-            format!(" with `--set {}`", o.overrides.join(" --set "))
-        },
+        study.config_clause(),
         if o.smoke { ", `--smoke`" } else { "" },
         o.seeds,
-        base.seed,
-        base.seed + o.seeds as u64 - 1,
         out.display()
     );
-    if !missing.is_empty() {
-        protocol.push_str(&format!(
-            " Not trained (left out; the runs column counts the finished ones): {}.",
-            missing.join(", ")
-        ));
+    if let Some(note) = not_trained(&done.missing) {
+        protocol.push(' ');
+        protocol.push_str(&note);
     }
-    write_report(&out, &results, &protocol)?;
+    write_report(out, &done.scores, &protocol)?;
     let md = std::fs::read_to_string(out.join("sweep.md"))?;
     Ok(format!(
         "{md}\nwrote sweep.md, sweep.csv, runs.csv, sweep.png in {}",
@@ -435,10 +361,17 @@ mod tests {
         ];
         let s = summarise(&rs);
         assert_eq!(s.len(), 3);
-        assert_eq!(s[0].1, 2);
-        assert!((s[0].2[0].0 - 0.5).abs() < 1e-12);
-        assert!((s[0].2[0].1 - 0.1414213562373095).abs() < 1e-12);
-        assert_eq!(s[1].2[0].1, 0.0);
+        assert_eq!(s[0].runs, 2);
+        assert!((s[0].columns[0].0 - 0.5).abs() < 1e-12);
+        assert!((s[0].columns[0].1 - 0.1414213562373095).abs() < 1e-12);
+        assert_eq!(s[1].columns[0].1, 0.0);
+        assert_eq!(s[0].columns[6], (60.0, 0.0));
+        // Rows come by count, whatever the order of the runs.
+        let keys: Vec<usize> = summarise(&[run(500, 0, 0.1), run(0, 0, 0.2)])
+            .iter()
+            .map(|g| g.key)
+            .collect();
+        assert_eq!(keys, [0, 500]);
         let best = best_counts(&s);
         assert_eq!(best[0].0, 0); // 0.5 everywhere: the smallest count wins
         let rs = [run(0, 0, 0.4), run(250, 0, 0.7)];

@@ -11,31 +11,23 @@
 //! folders, each with `transfer.json` (its score on the external set, reused unless the
 //! set or the checkpoint epoch changed), `runs.csv` (one row per run), `transfer.csv` /
 //! `transfer.md` (mean ± sample std over seeds of bbox AP, segm AP, AP50, AP75, the
-//! change of segm AP against the base, and the optimiser steps per run). Resumable like
-//! `sweep`: finished runs are read, a stopped run continues from `last.bpk`,
-//! `--no-train` reports what finished and names the rest.
+//! change of segm AP against the base, and the optimiser steps per run). A study on
+//! [`super::runner`], resumable like every study there: finished runs are read, a stopped
+//! run continues from `last.bpk`, `--no-train` reports what finished and names the rest.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::config::Randomize;
 use crate::config::{self, Config, DeviceKind};
-use crate::eval::report::{stat_cells, stat_columns, Table};
-use crate::infer::checkpoint::Checkpoint;
+use crate::eval::report::Table;
 use crate::infer::validate::{score_checkpoint, SplitName};
 use crate::train::run_files::{self, IouStats};
-use crate::train::trainer::{train, TrainOptions};
-use crate::util::stats::mean_std;
 
-/// One variant: its name (its folder), what it changes, the `--set` overrides.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TransferVariant {
-    pub name: String,
-    pub change: String,
-    pub overrides: Vec<String>,
-}
+use super::runner::{choose, not_trained, variant_names, State, Study, StudyFlags, Variant};
+use super::summary::{group, md_cell, mean_std_cells, mean_std_columns, runs_table, Group};
 
 /// The augmentation keys a variant can turn off: (variant suffix, key, value that turns
 /// it off, whether `cfg` has it on).
@@ -61,8 +53,8 @@ fn augmentations(cfg: &Config) -> [(&'static str, &'static str, &'static str, bo
 /// `base`, then `no-<group>` for each randomisation group `cfg` has on (only when it
 /// trains on synthetic images: the groups change nothing else), then `no-<aug>` for each
 /// augmentation it has on.
-pub fn variants(cfg: &Config) -> Result<Vec<TransferVariant>> {
-    let mut v = vec![TransferVariant {
+pub fn variants(cfg: &Config) -> Result<Vec<Variant>> {
+    let mut v = vec![Variant {
         name: "base".into(),
         change: "the config as given".into(),
         overrides: Vec::new(),
@@ -71,7 +63,7 @@ pub fn variants(cfg: &Config) -> Result<Vec<TransferVariant>> {
         let r: Randomize = cfg.data.randomize;
         for g in Randomize::GROUPS {
             if r.with(g, false)? != r {
-                v.push(TransferVariant {
+                v.push(Variant {
                     name: format!("no-{g}"),
                     change: format!("domain-randomisation group `{g}` off"),
                     overrides: vec![format!("data.randomize.{g}=false")],
@@ -81,7 +73,7 @@ pub fn variants(cfg: &Config) -> Result<Vec<TransferVariant>> {
     }
     for (name, key, off, on) in augmentations(cfg) {
         if on {
-            v.push(TransferVariant {
+            v.push(Variant {
                 name: format!("no-{name}"),
                 change: format!("`{key} = {off}`"),
                 overrides: vec![format!("{key}={off}")],
@@ -91,39 +83,28 @@ pub fn variants(cfg: &Config) -> Result<Vec<TransferVariant>> {
     Ok(v)
 }
 
-/// The variants named in `only` (all when empty), in [`variants`] order; an unknown name
-/// is an error listing the known ones.
-pub fn choose(all: Vec<TransferVariant>, only: &[String]) -> Result<Vec<TransferVariant>> {
-    for n in only {
-        if !all.iter().any(|v| &v.name == n) {
-            let names: Vec<&str> = all.iter().map(|v| v.name.as_str()).collect();
-            bail!(
-                "unknown transfer variant {n:?} for this config (known: {}; a group or augmentation that is already off has no variant)",
-                names.join(", ")
-            );
-        }
-    }
-    Ok(all
-        .into_iter()
-        .filter(|v| only.is_empty() || only.contains(&v.name))
-        .collect())
-}
-
-/// Options of `bench transfer`.
-#[derive(Clone, Debug)]
+/// `bench transfer`'s flags.
+#[derive(Clone, Debug, clap::Args)]
 pub struct TransferOptions {
+    /// Base config file, or the name of a shipped config.
+    #[arg(long)]
     pub config: String,
-    /// Data config of the external set every run is scored on (its test split).
+    /// Data config of the set to score on, every image test (e.g.
+    /// bench/crossdomain/crossdomain.toml).
+    #[arg(long)]
     pub data_eval: String,
+    /// Seeds per variant (config seed, seed + 1, …).
+    #[arg(long, default_value_t = 1)]
     pub seeds: usize,
-    /// Variant names to run (all when empty).
-    pub only: Vec<String>,
-    /// `--set` overrides applied to every run, before the variant's own.
-    pub overrides: Vec<String>,
-    pub out: PathBuf,
-    pub no_train: bool,
+    /// Comma-separated subset, e.g. base,no-lighting,no-mosaic (default: all of
+    /// base, no-<group> per randomisation group on, no-<aug> per augmentation on).
+    #[arg(long)]
+    pub variants: Option<String>,
+    #[command(flatten)]
+    pub study: StudyFlags,
+    /// Override the configs' device: flex, ndarray, cuda[:N] or wgpu.
+    #[arg(long)]
     pub device: Option<DeviceKind>,
-    pub quiet: bool,
 }
 
 /// `<run>/transfer.json`: a run's `best.bpk` scored on the external set.
@@ -185,88 +166,54 @@ fn score_run(dir: &Path, data: &str, device: Option<DeviceKind>) -> Result<Trans
     Ok(t)
 }
 
-/// One row per variant: (name, runs, [bbox AP, segm AP, segm AP50, segm AP75] as
-/// (mean, sample std), mean optimiser steps).
-pub type Summary = Vec<(String, usize, [(f64, f64); 4], f64)>;
+/// The summary's metrics, each (mean, sample std) per variant.
+const METRICS: [&str; 4] = ["bbox AP", "segm AP", "segm AP50", "segm AP75"];
 
-/// Mean ± sample std per variant, in the order the variants first appear in `runs`.
-pub fn summarise(runs: &[RunScore]) -> Summary {
-    let mut names: Vec<&str> = Vec::new();
-    for r in runs {
-        if !names.contains(&r.variant.as_str()) {
-            names.push(&r.variant);
-        }
-    }
-    names
-        .into_iter()
-        .map(|n| {
-            let rs: Vec<&RunScore> = runs.iter().filter(|r| r.variant == n).collect();
-            let col = |f: &dyn Fn(&RunScore) -> f64| {
-                mean_std(&rs.iter().map(|r| f(r)).collect::<Vec<_>>())
-            };
-            let ms = [
-                col(&|r| r.bbox[0]),
-                col(&|r| r.segm[0]),
-                col(&|r| r.segm[1]),
-                col(&|r| r.segm[2]),
-            ];
-            let steps = col(&|r| r.steps as f64).0;
-            (n.to_string(), rs.len(), ms, steps)
-        })
-        .collect()
+/// One row per variant, in the order the variants first appear in `runs`: [`METRICS`]
+/// then the optimiser steps, each as (mean, sample std).
+pub fn summarise(runs: &[RunScore]) -> Vec<Group<String>> {
+    group(
+        runs,
+        |r| r.variant.clone(),
+        |r| vec![r.bbox[0], r.segm[0], r.segm[1], r.segm[2], r.steps as f64],
+    )
 }
 
 /// Writes `runs.csv`, `transfer.csv` and `transfer.md` into `out`; returns the markdown.
 pub fn write_report(out: &Path, runs: &[RunScore], preamble: &str) -> Result<String> {
-    let mut rc = Table::new(
-        ["variant", "seed", "steps"]
-            .into_iter()
-            .map(String::from)
-            .chain(stat_columns()),
+    let rc = runs_table(
+        &["variant", "seed", "steps"],
+        runs.iter().map(|r| {
+            let ids = vec![r.variant.clone(), r.seed.to_string(), r.steps.to_string()];
+            (ids, &r.bbox, &r.segm)
+        }),
     );
-    for r in runs {
-        let mut row = vec![r.variant.clone(), r.seed.to_string(), r.steps.to_string()];
-        row.extend(stat_cells(&r.bbox, &r.segm));
-        rc.push(row);
-    }
     crate::util::write_atomic(&out.join("runs.csv"), rc.to_csv().as_bytes())?;
 
     let s = summarise(runs);
-    let base = s.iter().find(|r| r.0 == "base").map(|r| r.2[1].0);
-    let names = ["bbox AP", "segm AP", "segm AP50", "segm AP75"];
+    let base = s.iter().find(|g| g.key == "base").map(|g| g.columns[1].0);
     let mut csv = Table::new(
         ["variant", "runs", "steps"]
             .into_iter()
             .map(String::from)
-            .chain(names.iter().flat_map(|n| {
-                let n = n.replace(' ', "_");
-                [format!("{n}_mean"), format!("{n}_std")]
-            }))
+            .chain(mean_std_columns(&METRICS))
             .chain(["segm_AP_delta_vs_base".to_string()]),
     );
     let mut md = Table::new(
         ["variant", "runs", "optimiser steps"]
             .into_iter()
-            .chain(names)
+            .chain(METRICS)
             .chain(["Δ segm AP vs base"]),
     );
-    for (n, k, ms, steps) in &s {
+    for g in &s {
+        let (n, k, ms, steps) = (&g.key, g.runs, &g.columns[..4], g.columns[4].0);
         let delta = base.map(|b| ms[1].0 - b);
         let mut row = vec![n.clone(), k.to_string(), format!("{steps:.0}")];
-        row.extend(
-            ms.iter()
-                .flat_map(|(m, sd)| [format!("{m:.4}"), format!("{sd:.4}")]),
-        );
+        row.extend(mean_std_cells(ms));
         row.push(delta.map_or(String::new(), |d| format!("{d:.4}")));
         csv.push(row);
         let mut row = vec![n.clone(), k.to_string(), format!("{steps:.0}")];
-        row.extend(ms.iter().map(|(m, sd)| {
-            if *k > 1 {
-                format!("{m:.3} ± {sd:.3}")
-            } else {
-                format!("{m:.3}")
-            }
-        }));
+        row.extend(ms.iter().map(|&m| md_cell(m, k)));
         row.push(match delta {
             Some(d) if n != "base" => format!("{d:+.3}"),
             _ => String::new(),
@@ -274,10 +221,21 @@ pub fn write_report(out: &Path, runs: &[RunScore], preamble: &str) -> Result<Str
         md.push(row);
     }
     crate::util::write_atomic(&out.join("transfer.csv"), csv.to_csv().as_bytes())?;
+    let text = format!(
+        "# Transfer ablation\n\n{preamble}\n\n{}\n\n{}",
+        compute_note(runs),
+        md.to_markdown()
+    );
+    crate::util::write_atomic(&out.join("transfer.md"), text.as_bytes())?;
+    Ok(text)
+}
+
+/// Whether every run took the same optimiser steps, in bold when they differ.
+fn compute_note(runs: &[RunScore]) -> String {
     let mut steps: Vec<usize> = runs.iter().map(|r| r.steps).collect();
     steps.sort_unstable();
     steps.dedup();
-    let compute = match steps.as_slice() {
+    match steps.as_slice() {
         [one] => format!("Every run took {one} optimiser steps (equal compute)."),
         many => format!(
             "**The runs differ in optimiser steps ({}): compare at equal compute by setting `train.steps_per_epoch`.**",
@@ -286,161 +244,114 @@ pub fn write_report(out: &Path, runs: &[RunScore], preamble: &str) -> Result<Str
                 .collect::<Vec<_>>()
                 .join(", ")
         ),
-    };
-    let text = format!(
-        "# Transfer ablation\n\n{preamble}\n\n{compute}\n\n{}",
-        md.to_markdown()
-    );
-    crate::util::write_atomic(&out.join("transfer.md"), text.as_bytes())?;
-    Ok(text)
+    }
+}
+
+/// The transfer ablation as a study: the chosen variants × seeds, folders
+/// `<variant>/seed<S>/`.
+fn study(o: &TransferOptions) -> Result<Study> {
+    let base = config::load(&o.config, &o.study.overrides)?;
+    // Fail before any training when the external set cannot be loaded.
+    config::load(&o.data_eval, &[]).with_context(|| format!("--data-eval {}", o.data_eval))?;
+    Ok(Study {
+        name: "transfer",
+        config: o.config.clone(),
+        variants: choose(
+            "transfer",
+            variants(&base)?,
+            &variant_names(&o.variants),
+            "; for this config, a group or augmentation that is already off has no variant",
+        )?,
+        seeds: o.seeds,
+        folder: |v, seed| format!("{v}/seed{seed}"),
+        out: o.study.out_or_default("transfer", &base.name),
+        overrides: o.study.overrides.clone(),
+        no_train: o.study.no_train,
+        smoke: false,
+        device: o.device,
+        quiet: o.study.quiet,
+    })
 }
 
 /// `chicktrain bench transfer`.
 pub fn transfer(o: &TransferOptions) -> Result<String> {
-    if o.seeds == 0 {
-        bail!("--seeds 0: every variant needs at least one seed");
-    }
-    let base = config::load(&o.config, &o.overrides)?;
-    // Fail before any training when the external set cannot be loaded.
-    config::load(&o.data_eval, &[]).with_context(|| format!("--data-eval {}", o.data_eval))?;
-    let chosen = choose(variants(&base)?, &o.only)?;
-    if !o.no_train {
-        std::fs::create_dir_all(&o.out)
-            .with_context(|| format!("cannot create {}", o.out.display()))?;
-    }
-    crate::train::interrupt::install();
-    let say = |s: String| {
-        if !o.quiet {
-            eprintln!("{s}");
+    let study = study(o)?;
+    let runs = study.plan()?;
+    let done = study.run(&runs, |r, state| {
+        if state == State::NotTrained {
+            return Ok(None);
         }
-    };
-    let (mut runs, mut missing) = (Vec::new(), Vec::new());
-    let total = chosen.len() * o.seeds;
-    for v in &chosen {
-        for k in 0..o.seeds as u64 {
-            let seed = base.seed + k;
-            let dir = o.out.join(&v.name).join(format!("seed{seed}"));
-            let mut set = o.overrides.clone();
-            set.extend(v.overrides.iter().cloned());
-            set.push(format!("seed={seed}"));
-            let cfg = config::load(&o.config, &set)
-                .with_context(|| format!("transfer variant {}", v.name))?;
-            if !dir.join("test.json").exists() {
-                if o.no_train {
-                    missing.push(format!("{}/seed{seed}", v.name));
-                    continue;
-                }
-                train_run(o, &cfg, &dir, &format!("{}/{total}", runs.len() + 1))
-                    .with_context(|| format!("transfer variant {} ({})", v.name, dir.display()))?;
-            }
-            say(format!(
-                "transfer: scoring {} on {}",
-                dir.display(),
-                o.data_eval
-            ));
-            let t = score_run(&dir, &o.data_eval, o.device)?;
-            runs.push(RunScore {
-                variant: v.name.clone(),
-                seed,
-                bbox: t.bbox.stats,
-                segm: t.segm.stats,
-                steps: run_files::total_steps(&dir)?,
-            });
-        }
-    }
-    if runs.is_empty() {
+        let dir = study.dir(r);
+        study.say(&format!("scoring {} on {}", dir.display(), o.data_eval));
+        let t = score_run(&dir, &o.data_eval, o.device)?;
+        Ok(Some(RunScore {
+            variant: study.variants[r.variant].name.clone(),
+            seed: r.seed,
+            bbox: t.bbox.stats,
+            segm: t.segm.stats,
+            steps: run_files::total_steps(&dir)?,
+        }))
+    })?;
+    if done.scores.is_empty() {
         bail!(
             "--no-train: no finished run (a folder with test.json) under {} for variants {}",
-            o.out.display(),
-            chosen
+            study.out.display(),
+            study
+                .variants
                 .iter()
                 .map(|v| v.name.as_str())
                 .collect::<Vec<_>>()
                 .join(", ")
         );
     }
+    let (first, last) = Study::seed_range(&runs);
     let mut pre = format!(
-        "Config `{}`{}; {} seed(s) per variant (seed {}…{}); `best.bpk` of each run (best val segm AP on its own split) scored on every image of `{}` (`chicktrain eval --checkpoint RUN/best.bpk --data {} --split test`). Variants:\n\n{}",
-        o.config,
-        if o.overrides.is_empty() {
-            String::new()
-        } else {
-            format!(" with `--set {}`", o.overrides.join(" --set "))
-        },
+        "{}; {} seed(s) per variant (seed {first}…{last}); `best.bpk` of each run (best val segm AP on its own split) scored on every image of `{}` (`chicktrain eval --checkpoint RUN/best.bpk --data {} --split test`). Variants:\n\n{}",
+        study.config_clause(),
         o.seeds,
-        base.seed,
-        base.seed + o.seeds as u64 - 1,
         o.data_eval,
         o.data_eval,
-        chosen
+        study
+            .variants
             .iter()
             .map(|v| format!("- `{}`: {}", v.name, v.change))
             .collect::<Vec<_>>()
             .join("\n")
     );
-    if !missing.is_empty() {
-        pre.push_str(&format!(
-            "\n\nNot trained (left out; the runs column counts the finished ones): {}.",
-            missing.join(", ")
-        ));
+    if let Some(note) = not_trained(&done.missing) {
+        pre.push_str("\n\n");
+        pre.push_str(&note);
     }
-    let md = write_report(&o.out, &runs, &pre)?;
+    let md = write_report(&study.out, &done.scores, &pre)?;
     Ok(format!(
         "{md}\nwrote transfer.md, transfer.csv, runs.csv in {}",
-        o.out.display()
+        study.out.display()
     ))
-}
-
-/// Trains one run into `dir`, resuming its `last.bpk` when that stopped early.
-fn train_run(o: &TransferOptions, cfg: &Config, dir: &Path, which: &str) -> Result<()> {
-    let last = dir.join("last.bpk");
-    let resume =
-        last.exists() && Checkpoint::load(&last).is_ok_and(|c| c.header.epoch < cfg.train.epochs);
-    if !o.quiet {
-        eprintln!(
-            "transfer: run {which}{} → {}",
-            if resume { " (resuming)" } else { "" },
-            dir.display()
-        );
-    }
-    let opts = TrainOptions {
-        run_dir: Some(dir.to_path_buf()),
-        resume,
-        smoke: false,
-        device: o.device,
-        quiet: o.quiet,
-        exist_ok: false,
-    };
-    train(cfg.clone(), &opts)?;
-    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn names(v: &[TransferVariant]) -> Vec<&str> {
+    fn names(v: &[Variant]) -> Vec<&str> {
         v.iter().map(|v| v.name.as_str()).collect()
     }
 
     #[test]
     fn one_variant_per_group_and_per_augmentation_that_is_on() {
         let q = config::load("quickstart.toml", &[]).unwrap();
+        // quickstart's augmentations that are on, after base and its groups.
+        let augs = [
+            "no-fliplr",
+            "no-hsv",
+            "no-degrees",
+            "no-scale",
+            "no-flipud",
+            "no-copy-paste",
+        ];
         let v = variants(&q).unwrap();
-        assert_eq!(
-            names(&v),
-            [
-                "base",
-                "no-carcass",
-                "no-physics",
-                "no-fliplr",
-                "no-hsv",
-                "no-degrees",
-                "no-scale",
-                "no-flipud",
-                "no-copy-paste"
-            ]
-        );
+        assert_eq!(names(&v)[..3], ["base", "no-carcass", "no-physics"]);
+        assert_eq!(names(&v)[3..], augs);
         let ov: Vec<String> = [
             "train.degrees=0",
             "train.mosaic=0.5",
@@ -474,32 +385,23 @@ mod tests {
         }
         // Without synthetic images the groups have nothing to change.
         let r = config::load("quickstart.toml", &["data.synthetic=0".into()]).unwrap();
-        assert_eq!(
-            names(&variants(&r).unwrap()),
-            [
-                "base",
-                "no-fliplr",
-                "no-hsv",
-                "no-degrees",
-                "no-scale",
-                "no-flipud",
-                "no-copy-paste"
-            ]
-        );
+        let v = variants(&r).unwrap();
+        assert_eq!((names(&v)[0], &names(&v)[1..]), ("base", &augs[..]));
     }
 
     #[test]
     fn choose_keeps_order_and_names_unknown_variants() {
-        let q = config::load("quickstart.toml", &[]).unwrap();
-        let v = choose(
-            variants(&q).unwrap(),
-            &["no-hsv".into(), "base".into(), "no-physics".into()],
-        )
-        .unwrap();
+        let o = |only: &str| TransferOptions {
+            config: "quickstart.toml".into(),
+            data_eval: "quickstart.toml".into(),
+            seeds: 1,
+            variants: Some(only.into()),
+            study: StudyFlags::default(),
+            device: None,
+        };
+        let v = study(&o("no-hsv,base,no-physics")).unwrap().variants;
         assert_eq!(names(&v), ["base", "no-physics", "no-hsv"]);
-        let e = choose(variants(&q).unwrap(), &["no-mosaic".into()])
-            .unwrap_err()
-            .to_string();
+        let e = study(&o("no-mosaic")).unwrap_err().to_string();
         assert!(
             e.contains("\"no-mosaic\"") && e.contains("no-fliplr"),
             "{e}"
@@ -530,10 +432,10 @@ mod tests {
         ];
         let s = summarise(&runs);
         assert_eq!(s.len(), 2);
-        assert!((s[0].2[1].0 - 0.5).abs() < 1e-12);
-        assert!((s[0].2[1].1 - 0.1414213562373095).abs() < 1e-12);
-        assert!((s[0].2[0].0 - 0.55).abs() < 1e-12);
-        assert_eq!((s[1].2[1].1, s[1].3), (0.0, 100.0));
+        assert!((s[0].columns[1].0 - 0.5).abs() < 1e-12);
+        assert!((s[0].columns[1].1 - 0.1414213562373095).abs() < 1e-12);
+        assert!((s[0].columns[0].0 - 0.55).abs() < 1e-12);
+        assert_eq!((s[1].columns[1].1, s[1].columns[4].0), (0.0, 100.0));
         let md = write_report(&dir, &runs, "protocol").unwrap();
         assert!(md.contains("Every run took 100 optimiser steps"), "{md}");
         assert!(
@@ -581,22 +483,24 @@ mod tests {
             config: "quickstart.toml".into(),
             data_eval: eval_cfg.display().to_string(),
             seeds: 1,
-            only: vec!["base".into(), "no-fliplr".into()],
-            overrides: [
-                format!("data.cache=\"{}\"", cache.display()),
-                "data.image_size=64".into(),
-                "data.crop=64".into(),
-                "data.real.count=4".into(),
-                "data.synthetic=0".into(),
-                "train.epochs=1".into(),
-                "train.batch=2".into(),
-                "train.steps_per_epoch=2".into(),
-            ]
-            .to_vec(),
-            out: dir.join("out"),
-            no_train: false,
+            variants: Some("base,no-fliplr".into()),
+            study: StudyFlags {
+                overrides: [
+                    format!("data.cache=\"{}\"", cache.display()),
+                    "data.image_size=64".into(),
+                    "data.crop=64".into(),
+                    "data.real.count=4".into(),
+                    "data.synthetic=0".into(),
+                    "train.epochs=1".into(),
+                    "train.batch=2".into(),
+                    "train.steps_per_epoch=2".into(),
+                ]
+                .to_vec(),
+                out: Some(dir.join("out")),
+                no_train: false,
+                quiet: true,
+            },
             device: None,
-            quiet: true,
         };
         let md = transfer(&o).unwrap();
         assert!(md.contains("Every run took 2 optimiser steps"), "{md}");
@@ -613,8 +517,11 @@ mod tests {
         // --no-train reports the same from the run folders; a variant never trained is
         // named as missing.
         let again = transfer(&TransferOptions {
-            no_train: true,
-            only: vec!["base".into(), "no-fliplr".into(), "no-hsv".into()],
+            variants: Some("base,no-fliplr,no-hsv".into()),
+            study: StudyFlags {
+                no_train: true,
+                ..o.study.clone()
+            },
             ..o.clone()
         })
         .unwrap();

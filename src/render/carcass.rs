@@ -529,6 +529,33 @@ fn bone_weights(sdf: &Sdf, p: Vec3) -> ([u16; 4], [f32; 4]) {
     (j, ww)
 }
 
+/// A grid cell's corners, as offsets from its lowest one (bit 0 = x, 1 = y, 2 = z).
+const CORNERS: [[usize; 3]; 8] = [
+    [0, 0, 0],
+    [1, 0, 0],
+    [0, 1, 0],
+    [1, 1, 0],
+    [0, 0, 1],
+    [1, 0, 1],
+    [0, 1, 1],
+    [1, 1, 1],
+];
+/// The cell's 12 edges, as pairs of [`CORNERS`] indices.
+const EDGES: [[usize; 2]; 12] = [
+    [0, 1],
+    [2, 3],
+    [4, 5],
+    [6, 7],
+    [0, 2],
+    [1, 3],
+    [4, 6],
+    [5, 7],
+    [0, 4],
+    [1, 5],
+    [2, 6],
+    [3, 7],
+];
+
 /// Naive surface nets: one vertex per sign-changing cell (mean of its edge crossings),
 /// one quad per sign-changing grid edge, oriented so normals point outwards.
 fn surface_nets(sdf: &Sdf, lo: Vec3, hi: Vec3, cell: f32) -> (Vec<Vec3>, Vec<u32>) {
@@ -545,30 +572,6 @@ fn surface_nets(sdf: &Sdf, lo: Vec3, hi: Vec3, cell: f32) -> (Vec<Vec3>, Vec<u32
             sdf.eval(at(i, j, k))
         })
         .collect();
-    const CORNERS: [[usize; 3]; 8] = [
-        [0, 0, 0],
-        [1, 0, 0],
-        [0, 1, 0],
-        [1, 1, 0],
-        [0, 0, 1],
-        [1, 0, 1],
-        [0, 1, 1],
-        [1, 1, 1],
-    ];
-    const EDGES: [[usize; 2]; 12] = [
-        [0, 1],
-        [2, 3],
-        [4, 5],
-        [6, 7],
-        [0, 2],
-        [1, 3],
-        [4, 6],
-        [5, 7],
-        [0, 4],
-        [1, 5],
-        [2, 6],
-        [3, 7],
-    ];
     let mut cell_vertex = vec![u32::MAX; nx * ny * nz];
     let mut positions = Vec::new();
     for k in 0..nz - 1 {

@@ -316,6 +316,20 @@ pub struct Area {
     pub half_view: f32,
 }
 
+/// Which prop: hands 4 in 20, gloves and shackles 3, knives 2, scrapers 1, packaging 3,
+/// fat scraps 4.
+fn draw_kind<R: Rng>(rng: &mut R) -> PropKind {
+    match rng.random_range(0..20) {
+        0..=3 => PropKind::Hand,
+        4..=6 => PropKind::Glove,
+        7..=9 => PropKind::Shackle,
+        10..=11 => PropKind::Knife,
+        12 => PropKind::Scraper,
+        13..=15 => PropKind::Packaging,
+        _ => PropKind::FatScrap,
+    }
+}
+
 /// Adds `count` distractors to `geo` (after the carcasses), resting on whatever lies
 /// under them, and returns their materials (index k = instance `PROP_BASE + k`).
 pub fn place<R: Rng>(
@@ -326,15 +340,7 @@ pub fn place<R: Rng>(
 ) -> Vec<PropMaterial> {
     let mut mats = Vec::with_capacity(count);
     for _ in 0..count {
-        let kind = match rng.random_range(0..20) {
-            0..=3 => PropKind::Hand,
-            4..=6 => PropKind::Glove,
-            7..=9 => PropKind::Shackle,
-            10..=11 => PropKind::Knife,
-            12 => PropKind::Scraper,
-            13..=15 => PropKind::Packaging,
-            _ => PropKind::FatScrap,
-        };
+        let kind = draw_kind(rng);
         let mut parts = Parts::default();
         let mat = material(rng, kind);
         let mut second: Option<(usize, PropMaterial)> = None;

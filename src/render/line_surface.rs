@@ -259,7 +259,7 @@ impl LineSurface {
         let q = p.truncate();
         let seed = self.seed;
         let grime = fbm2(seed ^ 7, q.x * 9.0, q.y * 9.0, 3);
-        let mut s = match &self.kind {
+        let s = match &self.kind {
             Kind::Steel {
                 finish,
                 f0,
@@ -308,42 +308,7 @@ impl LineSurface {
                 modular,
                 pitch,
                 dir,
-            } => {
-                let along = q.dot(*dir) / pitch;
-                let across = q.dot(dir.perp()) / (pitch * 0.5);
-                let albedo = if *modular {
-                    let row = along.floor();
-                    let shift = if (row as i64).rem_euclid(2) == 0 {
-                        0.0
-                    } else {
-                        0.5
-                    };
-                    let fu = along.rem_euclid(1.0);
-                    let fv = (across + shift).rem_euclid(1.0);
-                    if fu < 0.08 || fv < 0.06 {
-                        *color * 0.12
-                    } else {
-                        // Slat ridges: a faint brightness ramp across each module.
-                        *color * (0.82 + 0.2 * grime + 0.06 * (fu * std::f32::consts::PI).sin())
-                    }
-                } else {
-                    // Flat belt: fabric-like fine texture and a seam every ~20 pitches.
-                    let fine = value2(seed ^ 5, q.x * 400.0, q.y * 400.0);
-                    let seam = (along / 20.0).rem_euclid(1.0) < 0.01;
-                    let k = if seam { 0.6 } else { 0.88 + 0.08 * fine };
-                    *color * (k + 0.15 * (grime - 0.5))
-                };
-                Surface {
-                    albedo,
-                    normal: Vec3::Z,
-                    f0: Vec3::splat(0.04),
-                    roughness: 0.45 + 0.1 * grime,
-                    metallic: 0.0,
-                    wrap: 0.0,
-                    sss_tint: Vec3::ONE,
-                    coat: 0.0,
-                }
-            }
+            } => belt(seed, q, grime, *color, *modular, *pitch, *dir),
             Kind::Crate { color, cell, dir } => {
                 let u = q.dot(*dir) / cell;
                 let v = q.dot(dir.perp()) / (cell * 1.6);
@@ -358,16 +323,7 @@ impl LineSurface {
                 } else {
                     *color * (0.85 + 0.2 * grime)
                 };
-                Surface {
-                    albedo,
-                    normal: Vec3::Z,
-                    f0: Vec3::splat(0.04),
-                    roughness: 0.4,
-                    metallic: 0.0,
-                    wrap: 0.0,
-                    sss_tint: Vec3::ONE,
-                    coat: 0.0,
-                }
+                dielectric(albedo, 0.4)
             }
             Kind::Generic {
                 a,
@@ -391,18 +347,16 @@ impl LineSurface {
                     Pattern::Cells => cellular3(seed ^ 12, Vec3::new(u, v, 0.0)).0.min(1.0),
                     Pattern::Speckle => value2(seed ^ 13, u * 8.0, v * 8.0),
                 };
-                Surface {
-                    albedo: a.lerp(*b, t.clamp(0.0, 1.0)),
-                    normal: Vec3::Z,
-                    f0: Vec3::splat(0.04),
-                    roughness: *roughness,
-                    metallic: 0.0,
-                    wrap: 0.0,
-                    sss_tint: Vec3::ONE,
-                    coat: 0.0,
-                }
+                dielectric(a.lerp(*b, t.clamp(0.0, 1.0)), *roughness)
             }
         };
+        self.films(s, q, grime)
+    }
+
+    /// The water film (`wet`, puddles) and the smears (blood, fat) over surface `s` at
+    /// plate point `q`.
+    fn films(&self, mut s: Surface, q: Vec2, grime: f32) -> Surface {
+        let seed = self.seed;
         if self.wet > 0.0 {
             // A water film: dielectrics darken (less diffuse light escapes) and gloss up;
             // steel gets a little duller in colour, much smoother.
@@ -430,6 +384,58 @@ impl LineSurface {
             s.roughness += ((if blood { 0.15 } else { 0.3 }) - s.roughness) * k;
         }
         s
+    }
+}
+
+/// A conveyor belt at plate point `q`: modular slats with hinge gaps, or a flat fabric
+/// belt with a seam every ~20 pitches.
+fn belt(
+    seed: u64,
+    q: Vec2,
+    grime: f32,
+    color: Vec3,
+    modular: bool,
+    pitch: f32,
+    dir: Vec2,
+) -> Surface {
+    let along = q.dot(dir) / pitch;
+    let across = q.dot(dir.perp()) / (pitch * 0.5);
+    let albedo = if modular {
+        let row = along.floor();
+        let shift = if (row as i64).rem_euclid(2) == 0 {
+            0.0
+        } else {
+            0.5
+        };
+        let fu = along.rem_euclid(1.0);
+        let fv = (across + shift).rem_euclid(1.0);
+        if fu < 0.08 || fv < 0.06 {
+            color * 0.12
+        } else {
+            // Slat ridges: a faint brightness ramp across each module.
+            color * (0.82 + 0.2 * grime + 0.06 * (fu * std::f32::consts::PI).sin())
+        }
+    } else {
+        // Flat belt: fabric-like fine texture and a seam every ~20 pitches.
+        let fine = value2(seed ^ 5, q.x * 400.0, q.y * 400.0);
+        let seam = (along / 20.0).rem_euclid(1.0) < 0.01;
+        let k = if seam { 0.6 } else { 0.88 + 0.08 * fine };
+        color * (k + 0.15 * (grime - 0.5))
+    };
+    dielectric(albedo, 0.45 + 0.1 * grime)
+}
+
+/// A matte dielectric (belt, crate, generic floor): `albedo`, `roughness`, F0 0.04.
+fn dielectric(albedo: Vec3, roughness: f32) -> Surface {
+    Surface {
+        albedo,
+        normal: Vec3::Z,
+        f0: Vec3::splat(0.04),
+        roughness,
+        metallic: 0.0,
+        wrap: 0.0,
+        sss_tint: Vec3::ONE,
+        coat: 0.0,
     }
 }
 

@@ -4,9 +4,10 @@
 //!
 //! Entry points:
 //! * [`render_sample`]: sample `index` of dataset seed `seed`, deterministic.
-//! * [`render_dataset`]: `images/`, `annotations.json`, `preview.png`, `render_meta.json`.
-//! * [`bench_render`]: images/s and the time split (scene, BVH build, trace, labels,
-//!   sensor, encode).
+//! * [`dataset::render_dataset`]: `images/`, `annotations.json`, `preview.png`,
+//!   `render_meta.json`.
+//! * [`bench::bench_render`]: images/s and the time split (scene, BVH build, trace,
+//!   labels, sensor, encode).
 //! * [`cache::load_or_render`]: one sample through the on-disk render cache.
 //!
 //! One concept per file: `carcass` (generator), `glb` (asset I/O), `asset` (the loaded
@@ -15,14 +16,16 @@
 //! `prop_material` (distractors' look and ids), `distractor` (their meshes), `noise`,
 //! `trace` (BVH rays + shading), `screen` (raster primary visibility, shadow filter,
 //! crevices), `sensor`, `labels`, `scene` (sampling), `preset` (options), `export`
-//! (COCO + preview), `cache`;
+//! (COCO + preview), `dataset` (a dataset folder), `bench` (render timings), `cache`;
 //! the carcass randomisation group: `family` (body families), `parts` (wings and legs
 //! posed or cut), `variety` (per-carcass draws: family, size, parts, skin marks, tears).
 
 pub mod asset;
+pub mod bench;
 pub mod cache;
 pub mod camera;
 pub mod carcass;
+pub mod dataset;
 pub mod distractor;
 pub mod export;
 pub mod family;
@@ -48,15 +51,11 @@ pub mod surface;
 pub mod trace;
 pub mod variety;
 
-use std::path::Path;
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
 use image::RgbImage;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
-use serde_json::json;
 
 use crate::util::hash::mix64;
 use crate::util::png::encode_png;
@@ -255,222 +254,6 @@ pub fn encode_sample(
     })
 }
 
-/// Number of preview tiles in `preview.png`.
-pub const PREVIEW_TILES: usize = 16;
-
-/// Renders `opts.count` images of seed `opts.seed` into `out_dir`: `images/NNNNNN.jpg`
-/// (or .png), `annotations.json` (COCO; `file_name`s are relative to `out_dir`),
-/// `preview.png` (first 16 images, mask overlays and boxes) and `render_meta.json`
-/// (renderer version, options, and the proxy flag for the proxy-real preset).
-pub fn render_dataset(opts: &RenderOptions, out_dir: &Path, progress: bool) -> anyhow::Result<()> {
-    use crate::annotations::coco::{CocoCategory, CocoDataset, CocoImage};
-    opts.validate()?;
-    asset::asset(opts.carcass.as_ref())?;
-    let img_dir = out_dir.join("images");
-    std::fs::create_dir_all(&img_dir)
-        .with_context(|| format!("cannot create {}", img_dir.display()))?;
-    let bar = if progress {
-        indicatif::ProgressBar::new(opts.count as u64)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("render {bar:40} {pos}/{len} {per_sec} eta {eta}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    struct Out {
-        image: CocoImage,
-        anns: Vec<crate::annotations::coco::CocoAnnotation>,
-        tile: Option<RgbImage>,
-    }
-    let results: Vec<anyhow::Result<Out>> = (0..opts.count as u64)
-        .into_par_iter()
-        .map(|i| {
-            let s = render_sample(opts, opts.seed, i)?;
-            let (bytes, ext) = encode_sample(opts, &s)?;
-            let name = format!("images/{i:06}.{ext}");
-            let path = out_dir.join(&name);
-            std::fs::write(&path, bytes)
-                .with_context(|| format!("cannot write {}", path.display()))?;
-            let image_id = i + 1;
-            // Annotation ids: image id * 1000 + k keeps them unique and independent of
-            // rendering order (at most 64 carcasses per image, validated).
-            let anns = export::annotations(
-                &s.ids,
-                opts.width,
-                opts.height,
-                &s.instances,
-                image_id,
-                image_id * 1000,
-            );
-            let tile = ((i as usize) < PREVIEW_TILES)
-                .then(|| export::overlay_tile(&s.image, &s.ids, &s.instances, 320));
-            bar.inc(1);
-            let mut extra = serde_json::Map::new();
-            extra.insert("density".into(), json!(s.density));
-            extra.insert("placed".into(), json!(s.placed));
-            Ok(Out {
-                image: CocoImage {
-                    id: image_id,
-                    file_name: name,
-                    width: opts.width,
-                    height: opts.height,
-                    extra,
-                },
-                anns,
-                tile,
-            })
-        })
-        .collect();
-    bar.finish_and_clear();
-    // The data layer's CocoDataset has optional fields (info, licenses) beyond these.
-    #[allow(clippy::needless_update)]
-    let mut ds = CocoDataset {
-        images: Vec::new(),
-        annotations: Vec::new(),
-        categories: vec![CocoCategory {
-            id: export::CARCASS_CATEGORY,
-            name: "carcass".into(),
-            extra: Default::default(),
-        }],
-        ..Default::default()
-    };
-    let mut tiles = Vec::new();
-    for r in results {
-        let o = r?;
-        ds.images.push(o.image);
-        ds.annotations.extend(o.anns);
-        tiles.extend(o.tile);
-    }
-    ds.save(&out_dir.join("annotations.json"))?;
-    if !tiles.is_empty() {
-        let sheet = export::contact_sheet(&tiles, 4);
-        let png = encode_png(&sheet)?;
-        std::fs::write(out_dir.join("preview.png"), png).context("cannot write preview.png")?;
-    }
-    let meta = json!({
-        "renderer_version": RENDERER_VERSION,
-        "preset": opts.preset,
-        "proxy": opts.is_proxy(),
-        "note": if opts.is_proxy() {
-            "PROXY for the paper's real photographs (not available): a distinct rendered photographic domain, not real data"
-        } else {
-            "synthetic rendered data"
-        },
-        "options": opts,
-        "images": ds.images.len(),
-        "annotations": ds.annotations.len(),
-    });
-    std::fs::write(
-        out_dir.join("render_meta.json"),
-        serde_json::to_vec_pretty(&meta)?,
-    )
-    .context("cannot write render_meta.json")?;
-    Ok(())
-}
-
-/// Result of [`bench_render`].
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct BenchReport {
-    pub images: usize,
-    pub width: u32,
-    pub height: u32,
-    pub threads: usize,
-    /// Wall time of the sequential pass (one image at a time, rows in parallel).
-    pub wall: Duration,
-    /// Sequential pass: latency-bound rate.
-    pub sequential_images_per_sec: f64,
-    /// Throughput with images rendered concurrently on the pool (as `render_dataset`
-    /// and the loader's workers do): serial stages (BVH build, pile drop) overlap.
-    pub images_per_sec: f64,
-    /// Mean triangles per image.
-    pub triangles: f64,
-    /// Mean per-image times (summed over stages that run on all cores).
-    pub mean: Timings,
-}
-
-impl std::fmt::Display for BenchReport {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let ms = |d: Duration| d.as_secs_f64() * 1e3;
-        write!(
-            f,
-            "{} images {}x{} on {} threads: {:.2} images/s concurrent, {:.2} images/s one at a \
-             time ({:.0} ms/image); per image: scene {:.1} ms (physics {:.1} ms), build {:.1} ms, trace {:.1} ms, \
-             labels {:.1} ms, sensor {:.1} ms, encode {:.1} ms; {:.0} triangles",
-            self.images,
-            self.width,
-            self.height,
-            self.threads,
-            self.images_per_sec,
-            self.sequential_images_per_sec,
-            ms(self.wall) / self.images.max(1) as f64,
-            ms(self.mean.scene),
-            ms(self.mean.physics),
-            ms(self.mean.build),
-            ms(self.mean.trace),
-            ms(self.mean.labels),
-            ms(self.mean.sensor),
-            ms(self.mean.encode),
-            self.triangles
-        )
-    }
-}
-
-/// Renders and encodes `images` samples (no files written) twice: one after another (each
-/// using all cores for its rows; gives the per-stage times) and then concurrently (gives
-/// the throughput a dataset render or the training loader sees).
-pub fn bench_render(opts: &RenderOptions, images: usize, seed: u64) -> anyhow::Result<BenchReport> {
-    opts.validate()?;
-    let asset = asset::asset(opts.carcass.as_ref())?;
-    // Warm-up (asset parse, family meshes, thread pool start) outside the timed loop.
-    if opts.randomize.carcass && opts.carcass.is_none() {
-        family::Family::prepare_all();
-    }
-    render_sample(opts, seed, u64::MAX)?;
-    let mut sum = Timings::default();
-    let t0 = Instant::now();
-    for i in 0..images as u64 {
-        let mut s = render_sample(opts, seed, i)?;
-        let te = Instant::now();
-        encode_sample(opts, &s)?;
-        s.timings.encode = te.elapsed();
-        sum += s.timings;
-    }
-    let wall = t0.elapsed();
-    // Throughput pass: the same images, several in flight at once.
-    let t1 = Instant::now();
-    (0..images as u64)
-        .into_par_iter()
-        .try_for_each(|i| -> anyhow::Result<()> {
-            let s = render_sample(opts, seed, i)?;
-            encode_sample(opts, &s)?;
-            Ok(())
-        })?;
-    let wall_par = t1.elapsed();
-    let n = images.max(1) as u32;
-    let mean = Timings {
-        scene: sum.scene / n,
-        physics: sum.physics / n,
-        build: sum.build / n,
-        trace: sum.trace / n,
-        labels: sum.labels / n,
-        sensor: sum.sensor / n,
-        encode: sum.encode / n,
-    };
-    let avg_carcasses = (opts.carcasses[0] + opts.carcasses[1]) as f64 / 2.0;
-    Ok(BenchReport {
-        images,
-        width: opts.width,
-        height: opts.height,
-        threads: rayon::current_num_threads(),
-        wall,
-        sequential_images_per_sec: images as f64 / wall.as_secs_f64().max(1e-9),
-        images_per_sec: images as f64 / wall_par.as_secs_f64().max(1e-9),
-        triangles: avg_carcasses * asset.mesh.triangle_count() as f64,
-        mean,
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -482,43 +265,6 @@ mod tests {
         let mut o = RenderOptions::synthetic(size);
         o.carcasses = [3, 6];
         o
-    }
-
-    #[test]
-    fn same_seed_gives_byte_identical_files() {
-        let base = std::env::temp_dir().join(format!("ct-det-{}", std::process::id()));
-        let mut o = small(96);
-        o.count = 3;
-        o.seed = 42;
-        let (a, b) = (base.join("a"), base.join("b"));
-        render_dataset(&o, &a, false).unwrap();
-        // Second run on a one-thread pool: scheduling must not matter.
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap()
-            .install(|| render_dataset(&o, &b, false))
-            .unwrap();
-        for f in [
-            "annotations.json",
-            "images/000000.jpg",
-            "images/000002.jpg",
-            "preview.png",
-        ] {
-            let (x, y) = (
-                std::fs::read(a.join(f)).unwrap(),
-                std::fs::read(b.join(f)).unwrap(),
-            );
-            assert!(x == y, "{f} differs between runs");
-        }
-        // A different seed gives different images.
-        o.seed = 43;
-        render_dataset(&o, &base.join("c"), false).unwrap();
-        assert_ne!(
-            std::fs::read(a.join("images/000000.jpg")).unwrap(),
-            std::fs::read(base.join("c/images/000000.jpg")).unwrap()
-        );
-        let _ = std::fs::remove_dir_all(&base);
     }
 
     #[test]
@@ -662,7 +408,7 @@ mod tests {
 #[cfg(test)]
 mod randomize_tests {
     use super::*;
-    use crate::annotations::coco::{CocoDataset, Segmentation};
+    use crate::annotations::coco::Segmentation;
     use crate::annotations::rle::Rle;
 
     fn groups(spec: &str, size: u32) -> RenderOptions {
@@ -717,29 +463,6 @@ mod randomize_tests {
             assert!(changed >= 2, "group {g} changed {changed}/3 images");
         }
         assert!(!base.instances.is_empty());
-    }
-
-    #[test]
-    fn empty_scenes_have_no_instances_and_a_valid_coco_export() {
-        let mut o = groups("scene,distractors", 64);
-        o.ranges.p_empty = 1.0;
-        let s = render_sample(&o, 1, 0).unwrap();
-        assert!(s.instances.is_empty() && s.placed == 0);
-        assert!(s.ids.iter().all(|&v| v == 0));
-        let dir = std::env::temp_dir().join(format!("ct-empty-{}", std::process::id()));
-        o.count = 2;
-        render_dataset(&o, &dir, false).unwrap();
-        let ds = CocoDataset::load(&dir.join("annotations.json")).unwrap();
-        assert_eq!(ds.images.len(), 2);
-        assert!(ds.annotations.is_empty());
-        // The render cache stores and reads back an image without instances.
-        let cache_dir = dir.join("cache");
-        std::fs::create_dir_all(&cache_dir).unwrap();
-        let first = cache::load_or_render(&o, 1, 0, Some(&cache_dir)).unwrap();
-        let again = cache::load_or_render(&o, 1, 0, Some(&cache_dir)).unwrap();
-        assert!(first.instances.is_empty() && again.instances.is_empty());
-        assert_eq!(first.ids, again.ids);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

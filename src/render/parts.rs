@@ -292,38 +292,26 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
     }
 }
 
-/// Removes every triangle touching a vertex beyond a plane (on its bones), keeps the
-/// largest connected piece (nothing floats), then closes each hole the cuts opened with
-/// a fan of flat triangles from the hole's centre, its rim vertices moved onto the plane.
-/// Cap vertices are separate from the skin's (flat normal, cut tissue code).
-fn cut_and_cap(mesh: &Mesh, skin: &Skin, redness: &[f32], planes: &[Plane]) -> (Mesh, Vec<f32>) {
-    let nv = mesh.positions.len();
-    let gone: Vec<bool> = (0..nv)
+/// Per vertex: whether a cut plane removes it (judged on its dominant bone).
+fn beyond_planes(mesh: &Mesh, skin: &Skin, planes: &[Plane]) -> Vec<bool> {
+    (0..mesh.positions.len())
         .map(|i| {
             let dom = skin.vertex_joints[i][0];
             planes.iter().any(|pl| pl.removes(mesh.positions[i], dom))
         })
-        .collect();
-    let mut kept: Vec<[u32; 3]> = Vec::new();
-    let mut removed_edges: HashMap<(u32, u32), ()> = HashMap::new();
-    for t in mesh.indices.chunks_exact(3) {
-        let t = [t[0], t[1], t[2]];
-        if t.iter().any(|&v| gone[v as usize]) {
-            for e in 0..3 {
-                removed_edges.insert((t[e], t[(e + 1) % 3]), ());
-            }
-        } else {
-            kept.push(t);
-        }
-    }
-    // Largest connected piece only.
+        .collect()
+}
+
+/// Keeps the triangles of the largest connected piece of `kept` (`nv` vertices; the
+/// lowest root on a tie), so nothing floats after a cut.
+fn keep_largest_piece(kept: &mut Vec<[u32; 3]>, nv: usize) {
     let mut parent: Vec<u32> = (0..nv as u32).collect();
-    for t in &kept {
+    for t in kept.iter() {
         union(&mut parent, t[0], t[1]);
         union(&mut parent, t[1], t[2]);
     }
     let mut size: HashMap<u32, usize> = HashMap::new();
-    for t in &kept {
+    for t in kept.iter() {
         *size.entry(find(&mut parent, t[0])).or_default() += 1;
     }
     let main = size
@@ -331,15 +319,24 @@ fn cut_and_cap(mesh: &Mesh, skin: &Skin, redness: &[f32], planes: &[Plane]) -> (
         .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
         .map(|(r, _)| *r);
     kept.retain(|t| Some(find(&mut parent, t[0])) == main);
+}
+
+/// The holes the cuts opened: the rim (directed edges of `kept` triangles whose twin was in
+/// a removed triangle), grouped by shared vertices, as (group root, its rim edges).
+fn holes(
+    kept: &[[u32; 3]],
+    removed_edges: &HashMap<(u32, u32), ()>,
+    nv: usize,
+) -> Vec<(u32, Vec<(u32, u32)>)> {
     // Rim: directed edges of kept triangles whose twin was in a removed triangle.
     let mut have: HashMap<(u32, u32), ()> = HashMap::new();
-    for t in &kept {
+    for t in kept {
         for e in 0..3 {
             have.insert((t[e], t[(e + 1) % 3]), ());
         }
     }
     let mut rim: Vec<(u32, u32)> = Vec::new();
-    for t in &kept {
+    for t in kept {
         for e in 0..3 {
             let (a, b) = (t[e], t[(e + 1) % 3]);
             if removed_edges.contains_key(&(b, a)) && !have.contains_key(&(b, a)) {
@@ -361,6 +358,30 @@ fn cut_and_cap(mesh: &Mesh, skin: &Skin, redness: &[f32], planes: &[Plane]) -> (
             None => holes.push((r, vec![(a, b)])),
         }
     }
+    holes
+}
+
+/// Removes every triangle touching a vertex beyond a plane (on its bones), keeps the
+/// largest connected piece (nothing floats), then closes each hole the cuts opened with
+/// a fan of flat triangles from the hole's centre, its rim vertices moved onto the plane.
+/// Cap vertices are separate from the skin's (flat normal, cut tissue code).
+fn cut_and_cap(mesh: &Mesh, skin: &Skin, redness: &[f32], planes: &[Plane]) -> (Mesh, Vec<f32>) {
+    let nv = mesh.positions.len();
+    let gone = beyond_planes(mesh, skin, planes);
+    let mut kept: Vec<[u32; 3]> = Vec::new();
+    let mut removed_edges: HashMap<(u32, u32), ()> = HashMap::new();
+    for t in mesh.indices.chunks_exact(3) {
+        let t = [t[0], t[1], t[2]];
+        if t.iter().any(|&v| gone[v as usize]) {
+            for e in 0..3 {
+                removed_edges.insert((t[e], t[(e + 1) % 3]), ());
+            }
+        } else {
+            kept.push(t);
+        }
+    }
+    keep_largest_piece(&mut kept, nv);
+    let holes = holes(&kept, &removed_edges, nv);
     let mut positions = mesh.positions.clone();
     let mut normals = mesh.normals.clone();
     let mut red = redness.to_vec();

@@ -168,21 +168,7 @@ fn drape(hf: &HeightField, pos: &mut [Vec3], nor: &mut [Vec3]) {
         .collect();
     // A carcass is semi-rigid: first a plane (tilt) fitted to the shifts, slope limited
     // to ~35°, then a soft residual on top of it that may sag at most 2 cm.
-    let (mut m, mut rhs) = (glam::Mat3::ZERO, Vec3::ZERO);
-    for j in 0..ny {
-        for i in 0..nx {
-            if let Some(v) = raw[j * nx + i] {
-                let f = Vec3::new(1.0, i as f32 * c, j as f32 * c);
-                m += glam::Mat3::from_cols(f * f.x, f * f.y, f * f.z);
-                rhs += f * v;
-            }
-        }
-    }
-    let coef = if m.determinant().abs() > 1e-12 {
-        m.inverse() * rhs
-    } else {
-        Vec3::new(rhs.x / m.x_axis.x.max(1.0), 0.0, 0.0)
-    };
+    let coef = fit_plane(&raw, nx, ny, c);
     let slope = Vec2::new(coef.y, coef.z);
     let slope = slope * (0.7 / slope.length().max(0.7));
     let plane = |i: usize, j: usize| coef.x + slope.x * i as f32 * c + slope.y * j as f32 * c;
@@ -224,19 +210,7 @@ fn drape(hf: &HeightField, pos: &mut [Vec3], nor: &mut [Vec3]) {
     }
     // A last light blur without the clamp: the clamp alone leaves cell-sized steps where
     // the support is bumpy (a few mm of give is what soft skin does anyway).
-    let prev = smooth.clone();
-    for j in 0..ny {
-        for i in 0..nx {
-            let (mut s, mut w) = (0.0, 0.0);
-            for y in j.saturating_sub(1)..(j + 2).min(ny) {
-                for x in i.saturating_sub(1)..(i + 2).min(nx) {
-                    s += prev[y * nx + x];
-                    w += 1.0;
-                }
-            }
-            smooth[j * nx + i] = s / w;
-        }
-    }
+    blur3(&mut smooth, nx, ny);
     // Bilinear shift (and its slope, for the normals) at a point: nearest-cell lookup
     // would crinkle the surface into cell-sized terraces.
     let at = |x: f32, y: f32| -> (f32, Vec2) {
@@ -257,6 +231,43 @@ fn drape(hf: &HeightField, pos: &mut [Vec3], nor: &mut [Vec3]) {
         p.z += d;
         // Surface z += d(x, y): normals tilt by the slope of d.
         *n = Vec3::new(n.x - n.z * g.x, n.y - n.z * g.y, n.z).normalize_or(*n);
+    }
+}
+
+/// Least-squares plane `coef.x + coef.y · x + coef.z · y` through the cells that have a
+/// shift (`raw`, `nx × ny` cells of `c` m); only an offset when the fit is degenerate.
+fn fit_plane(raw: &[Option<f32>], nx: usize, ny: usize, c: f32) -> Vec3 {
+    let (mut m, mut rhs) = (glam::Mat3::ZERO, Vec3::ZERO);
+    for j in 0..ny {
+        for i in 0..nx {
+            if let Some(v) = raw[j * nx + i] {
+                let f = Vec3::new(1.0, i as f32 * c, j as f32 * c);
+                m += glam::Mat3::from_cols(f * f.x, f * f.y, f * f.z);
+                rhs += f * v;
+            }
+        }
+    }
+    if m.determinant().abs() > 1e-12 {
+        m.inverse() * rhs
+    } else {
+        Vec3::new(rhs.x / m.x_axis.x.max(1.0), 0.0, 0.0)
+    }
+}
+
+/// A 3 × 3 box blur of an `nx × ny` grid, in place (edges average what they have).
+fn blur3(grid: &mut [f32], nx: usize, ny: usize) {
+    let prev = grid.to_vec();
+    for j in 0..ny {
+        for i in 0..nx {
+            let (mut s, mut w) = (0.0, 0.0);
+            for y in j.saturating_sub(1)..(j + 2).min(ny) {
+                for x in i.saturating_sub(1)..(i + 2).min(nx) {
+                    s += prev[y * nx + x];
+                    w += 1.0;
+                }
+            }
+            grid[j * nx + i] = s / w;
+        }
     }
 }
 

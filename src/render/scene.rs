@@ -103,12 +103,7 @@ pub fn sample<R: Rng>(
         skins.clear();
     }
     if groups.carcass {
-        let mut stream = streams.rng(opts, "carcass");
-        for (plan, skin) in plans.iter_mut().zip(&mut skins) {
-            let mut r = Variety::instance_rng(&mut stream);
-            let user = opts.carcass.is_some();
-            plan.variety = Some(Variety::sample(&mut r, asset, user, &mut plan.pose, skin));
-        }
+        vary_carcasses(streams, opts, asset, &mut plans, &mut skins);
     }
     // The physics group settles the pile with rigid-body contact; its draws come from its
     // own stream, so the main stream (and every choice after this) is unchanged.
@@ -410,6 +405,23 @@ struct CarcassPlan {
     candidates: Vec<Vec2>,
     /// Family, parts and torn skin (carcass randomisation group only).
     variety: Option<Variety>,
+}
+
+/// The carcass group: each planned carcass's variety (family, size, parts, skin marks,
+/// tears), drawn from the group's own stream, one sub-stream per carcass.
+fn vary_carcasses(
+    streams: &Streams,
+    opts: &RenderOptions,
+    asset: &Asset,
+    plans: &mut [CarcassPlan],
+    skins: &mut [SkinMaterial],
+) {
+    let mut stream = streams.rng(opts, "carcass");
+    for (plan, skin) in plans.iter_mut().zip(skins) {
+        let mut r = Variety::instance_rng(&mut stream);
+        let user = opts.carcass.is_some();
+        plan.variety = Some(Variety::sample(&mut r, asset, user, &mut plan.pose, skin));
+    }
 }
 
 /// Draws every carcass's pose, resting mode, rotation, drop candidates and skin, in a

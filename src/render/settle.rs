@@ -1,5 +1,9 @@
 //! Piles settled by rigid-body physics (rapier3d): the `physics` randomisation group.
 //!
+//! One concept: settling a pile with rigid-body physics — each carcass as convex hulls of
+//! its skin parts, the rapier world with its fixed step, and the settled poses (about 490
+//! lines of code and 360 of tests, which need the same fixtures).
+//!
 //! The height-field drop (`pile.rs`) only knows the top surface of what fell before, so a
 //! carcass can never lean against another one's side or slide off a pile; here each
 //! carcass, already posed and turned into its drop orientation, becomes one rigid body made
@@ -275,26 +279,9 @@ fn rv(v: Vec3) -> rapier3d::math::Vector {
     rapier3d::math::Vector::new(v.x, v.y, v.z)
 }
 
-/// Drops `bodies` (in order) with their `plans`' release points and gaps, inside `fence`,
-/// and steps until the pile is at rest.
-pub fn settle(
-    bodies: &[BodyInput],
-    plans: &[DropPlan],
-    fence: Fence,
-) -> Result<Settled, SettleError> {
-    let t0 = Instant::now();
-    if plans.len() != bodies.len() {
-        return Err(SettleError::Mismatch {
-            plans: plans.len(),
-            bodies: bodies.len(),
-        });
-    }
-    use rayon::prelude::*;
-    let hulls: Vec<Vec<Vec<Vec3>>> = bodies
-        .par_iter()
-        .enumerate()
-        .map(|(k, b)| part_hulls(k, b))
-        .collect::<Result<_, _>>()?;
+/// The empty world: gravity, the fixed step and solver settings, and the plate with the
+/// ring of guide walls on one fixed body (returned with the world).
+fn stage(fence: Fence) -> (PhysicsWorld, RigidBodyHandle) {
     let mut world = PhysicsWorld::new();
     world.gravity = rv(Vec3::new(0.0, 0.0, -9.81));
     let ip = &mut world.integration_parameters;
@@ -322,6 +309,46 @@ pub fn settle(
             .restitution(RESTITUTION);
         world.insert_collider(wall, Some(ground));
     }
+    (world, ground)
+}
+
+/// Steps `world` until every body of `handles` sleeps or [`MAX_STEPS`] are done:
+/// (steps taken, whether all slept).
+fn step_until_asleep(world: &mut PhysicsWorld, handles: &[RigidBodyHandle]) -> (usize, bool) {
+    let mut steps = 0;
+    let mut asleep = false;
+    while steps < MAX_STEPS {
+        world.step();
+        steps += 1;
+        if handles.iter().all(|h| world.bodies[*h].is_sleeping()) {
+            asleep = true;
+            break;
+        }
+    }
+    (steps, asleep)
+}
+
+/// Drops `bodies` (in order) with their `plans`' release points and gaps, inside `fence`,
+/// and steps until the pile is at rest.
+pub fn settle(
+    bodies: &[BodyInput],
+    plans: &[DropPlan],
+    fence: Fence,
+) -> Result<Settled, SettleError> {
+    let t0 = Instant::now();
+    if plans.len() != bodies.len() {
+        return Err(SettleError::Mismatch {
+            plans: plans.len(),
+            bodies: bodies.len(),
+        });
+    }
+    use rayon::prelude::*;
+    let hulls: Vec<Vec<Vec<Vec3>>> = bodies
+        .par_iter()
+        .enumerate()
+        .map(|(k, b)| part_hulls(k, b))
+        .collect::<Result<_, _>>()?;
+    let (mut world, ground) = stage(fence);
     // Release heights: each carcass starts `gap` above the highest carcass released before
     // it whose footprint (xy box) overlaps its own, so the pile forms in one short fall.
     let mut placed: Vec<(Vec2, Vec2, f32)> = Vec::with_capacity(bodies.len());
@@ -366,16 +393,7 @@ pub fn settle(
             return Err(SettleError::Degenerate { body: k });
         }
     }
-    let mut steps = 0;
-    let mut asleep = false;
-    while steps < MAX_STEPS {
-        world.step();
-        steps += 1;
-        if handles.iter().all(|h| world.bodies[*h].is_sleeping()) {
-            asleep = true;
-            break;
-        }
-    }
+    let (steps, asleep) = step_until_asleep(&mut world, &handles);
     let mut motions = Vec::with_capacity(handles.len());
     let mut max_speed = 0.0f32;
     for (k, h) in handles.iter().enumerate() {

@@ -341,12 +341,7 @@ impl Tracer {
                 }
             }
             let e = light.color * (cos_l / dist2);
-            let lambert = ndl.max(0.0);
-            let diffuse = s.albedo
-                * (1.0 - s.metallic)
-                * (Vec3::splat(lambert) + (wrapped - lambert) * s.sss_tint)
-                / std::f32::consts::PI;
-            direct += e * diffuse;
+            direct += e * diffuse(s, ndl, wrapped);
         }
         direct *= light.area() / ns as f32;
         // Specular: the soft box mirrored in the surface, blurred by the lobe width (a
@@ -382,12 +377,7 @@ impl Tracer {
                 let wrapped = ((ndl + s.wrap) / (1.0 + s.wrap)).max(0.0);
                 let mut d_i = Vec3::ZERO;
                 if cos_l > 0.0 && wrapped > 0.0 {
-                    let lambert = ndl.max(0.0);
-                    let diffuse = s.albedo
-                        * (1.0 - s.metallic)
-                        * (Vec3::splat(lambert) + (wrapped - lambert) * s.sss_tint)
-                        / std::f32::consts::PI;
-                    d_i = fl.color * (cos_l / dist2) * fl.area() * diffuse;
+                    d_i = fl.color * (cos_l / dist2) * fl.area() * diffuse(s, ndl, wrapped);
                 }
                 d_i += fr * fl.color * light_coverage(fl, p, r, s.roughness);
                 let v_i = if skip_shadow || d_i == Vec3::ZERO {
@@ -495,6 +485,15 @@ fn schlick(f0: Vec3, cos: f32) -> Vec3 {
     let m = (1.0 - cos).clamp(0.0, 1.0);
     let m2 = m * m;
     f0 + (Vec3::ONE - f0) * (m2 * m2 * m)
+}
+
+/// Lambert diffuse with wrap lighting and a subsurface tint: what `s` scatters towards
+/// the eye per unit irradiance from a light at `n · l = ndl` (`wrapped` is the wrapped
+/// cosine), metals scattering none.
+fn diffuse(s: &Surface, ndl: f32, wrapped: f32) -> Vec3 {
+    let lambert = ndl.max(0.0);
+    s.albedo * (1.0 - s.metallic) * (Vec3::splat(lambert) + (wrapped - lambert) * s.sss_tint)
+        / std::f32::consts::PI
 }
 
 #[cfg(test)]

@@ -149,40 +149,7 @@ impl PtFile {
                 t.stride.len()
             );
         }
-        // Element offsets of the view in row-major order.
-        let mut offsets = Vec::with_capacity(numel);
-        if numel > 0 {
-            let mut idx = vec![0usize; t.shape.len()];
-            loop {
-                let off = idx
-                    .iter()
-                    .zip(&t.stride)
-                    .try_fold(t.offset, |a, (i, s)| a.checked_add(i.checked_mul(*s)?))
-                    .unwrap_or(usize::MAX);
-                if off >= st.numel {
-                    bail!(
-                        "{}: tensor {name} (shape {:?}, stride {:?}, offset {}) reaches past its storage of {} elements",
-                        self.path, t.shape, t.stride, t.offset, st.numel
-                    );
-                }
-                offsets.push(off);
-                let mut d = t.shape.len();
-                loop {
-                    if d == 0 {
-                        break;
-                    }
-                    d -= 1;
-                    idx[d] += 1;
-                    if idx[d] < t.shape[d] {
-                        break;
-                    }
-                    idx[d] = 0;
-                }
-                if idx.iter().all(|&i| i == 0) {
-                    break;
-                }
-            }
-        }
+        let offsets = self.view_offsets(name, t, numel)?;
         let sz = st.dtype.size();
         let at = |o: usize| &bytes[o * sz..o * sz + sz];
         let data = if st.dtype.is_float() {
@@ -222,6 +189,45 @@ impl PtFile {
             data,
             source_dtype: st.dtype.name(),
         })
+    }
+
+    /// The element offsets of view `t` (`numel` elements) into its storage, in row-major
+    /// order; an offset past the storage is an error naming the tensor.
+    fn view_offsets(&self, name: &str, t: &TensorRef, numel: usize) -> Result<Vec<usize>> {
+        let mut offsets = Vec::with_capacity(numel);
+        if numel > 0 {
+            let mut idx = vec![0usize; t.shape.len()];
+            loop {
+                let off = idx
+                    .iter()
+                    .zip(&t.stride)
+                    .try_fold(t.offset, |a, (i, s)| a.checked_add(i.checked_mul(*s)?))
+                    .unwrap_or(usize::MAX);
+                if off >= t.storage.numel {
+                    bail!(
+                        "{}: tensor {name} (shape {:?}, stride {:?}, offset {}) reaches past its storage of {} elements",
+                        self.path, t.shape, t.stride, t.offset, t.storage.numel
+                    );
+                }
+                offsets.push(off);
+                let mut d = t.shape.len();
+                loop {
+                    if d == 0 {
+                        break;
+                    }
+                    d -= 1;
+                    idx[d] += 1;
+                    if idx[d] < t.shape[d] {
+                        break;
+                    }
+                    idx[d] = 0;
+                }
+                if idx.iter().all(|&i| i == 0) {
+                    break;
+                }
+            }
+        }
+        Ok(offsets)
     }
 
     /// Reads every tensor of `entries`, keeping their order.

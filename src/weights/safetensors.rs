@@ -103,47 +103,7 @@ pub fn parse(b: &[u8]) -> Result<(BTreeMap<String, HostTensor>, BTreeMap<String,
                 data.len()
             );
         }
-        let raw = &data[off[0]..off[1]];
-        let chunks = raw.chunks_exact(size);
-        let data = match dtype {
-            "F16" => HostData::F32(
-                chunks
-                    .map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32())
-                    .collect(),
-            ),
-            "BF16" => HostData::F32(
-                chunks
-                    .map(|c| half::bf16::from_le_bytes([c[0], c[1]]).to_f32())
-                    .collect(),
-            ),
-            "F32" => HostData::F32(
-                chunks
-                    .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
-                    .collect(),
-            ),
-            "F64" => HostData::F32(
-                chunks
-                    .map(|c| f64::from_le_bytes(c.try_into().unwrap()) as f32)
-                    .collect(),
-            ),
-            "I64" => HostData::I64(
-                chunks
-                    .map(|c| i64::from_le_bytes(c.try_into().unwrap()))
-                    .collect(),
-            ),
-            "I32" => HostData::I64(
-                chunks
-                    .map(|c| i32::from_le_bytes(c.try_into().unwrap()) as i64)
-                    .collect(),
-            ),
-            "I16" => HostData::I64(
-                chunks
-                    .map(|c| i16::from_le_bytes([c[0], c[1]]) as i64)
-                    .collect(),
-            ),
-            "I8" => HostData::I64(chunks.map(|c| c[0] as i8 as i64).collect()),
-            _ => HostData::I64(chunks.map(|c| c[0] as i64).collect()),
-        };
+        let data = decode(dtype, size, &data[off[0]..off[1]]);
         out.insert(
             name,
             HostTensor {
@@ -154,6 +114,51 @@ pub fn parse(b: &[u8]) -> Result<(BTreeMap<String, HostTensor>, BTreeMap<String,
         );
     }
     Ok((out, meta))
+}
+
+/// A tensor's little-endian values of `dtype` (`size` bytes each, checked by the caller):
+/// floats widened or narrowed to f32, integers and bools to i64.
+fn decode(dtype: &str, size: usize, raw: &[u8]) -> HostData {
+    let chunks = raw.chunks_exact(size);
+    match dtype {
+        "F16" => HostData::F32(
+            chunks
+                .map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32())
+                .collect(),
+        ),
+        "BF16" => HostData::F32(
+            chunks
+                .map(|c| half::bf16::from_le_bytes([c[0], c[1]]).to_f32())
+                .collect(),
+        ),
+        "F32" => HostData::F32(
+            chunks
+                .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+                .collect(),
+        ),
+        "F64" => HostData::F32(
+            chunks
+                .map(|c| f64::from_le_bytes(c.try_into().unwrap()) as f32)
+                .collect(),
+        ),
+        "I64" => HostData::I64(
+            chunks
+                .map(|c| i64::from_le_bytes(c.try_into().unwrap()))
+                .collect(),
+        ),
+        "I32" => HostData::I64(
+            chunks
+                .map(|c| i32::from_le_bytes(c.try_into().unwrap()) as i64)
+                .collect(),
+        ),
+        "I16" => HostData::I64(
+            chunks
+                .map(|c| i16::from_le_bytes([c[0], c[1]]) as i64)
+                .collect(),
+        ),
+        "I8" => HostData::I64(chunks.map(|c| c[0] as i8 as i64).collect()),
+        _ => HostData::I64(chunks.map(|c| c[0] as i64).collect()),
+    }
 }
 
 /// The bytes of a safetensors file holding `tensors` (f32 → `F32`, i64 → `I64`) in the given

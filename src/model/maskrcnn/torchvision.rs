@@ -6,6 +6,9 @@
 //! [`crate::model::weights::apply`]. The export ([`torchvision_state_dict`], behind
 //! `export --format safetensors`) reads the same rule table backwards.
 //!
+//! One concept: the map between torchvision's state-dict keys and layouts and this Mask
+//! R-CNN's, read both ways from one rule table (about 570 lines of code, 210 of tests).
+//!
 //! What changes on the way:
 //! - BatchNorm `weight`/`bias` are Burn's `gamma`/`beta`; `num_batches_tracked` is dropped.
 //!   torchvision's detection backbones use `FrozenBatchNorm2d` (the same four tensors).
