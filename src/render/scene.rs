@@ -125,21 +125,7 @@ pub fn sample<R: Rng>(
         lighting = Lighting::sample(&mut light_rng, &wide, view.look_at);
         fill = fill_lights(&mut light_rng, opts, view.look_at, &lighting.light);
     }
-    let mut background = Background::sample(
-        rng,
-        opts.p_belt,
-        opts.p_stains,
-        opts.steel_roughness,
-        view.half_view * 1.5,
-    );
-    if groups.scene {
-        background = Background::Line(Box::new(LineSurface::sample(
-            &mut scene_rng,
-            &opts.ranges,
-            view.look_at,
-            view.half_view * 1.2,
-        )));
-    }
+    let background = floor(rng, &mut scene_rng, groups.scene, opts, &view);
     let mut sensor = sample_sensor(rng, opts, lighting.light_rgb);
     let q = opts.jpeg_quality;
     let mut jpeg_quality = rng.random_range(q[0].min(q[1])..=q[1].max(q[0]));
@@ -405,6 +391,33 @@ struct CarcassPlan {
     candidates: Vec<Vec2>,
     /// Family, parts and torn skin (carcass randomisation group only).
     variety: Option<Variety>,
+}
+
+/// What the pile lies on: the main stream's plate or belt, which it always draws, replaced
+/// with the scene group on by a processing-line surface from the scene stream.
+fn floor<R: Rng>(
+    rng: &mut R,
+    scene_rng: &mut rand_chacha::ChaCha8Rng,
+    scene: bool,
+    opts: &RenderOptions,
+    view: &View,
+) -> Background {
+    let background = Background::sample(
+        rng,
+        opts.p_belt,
+        opts.p_stains,
+        opts.steel_roughness,
+        view.half_view * 1.5,
+    );
+    if !scene {
+        return background;
+    }
+    Background::Line(Box::new(LineSurface::sample(
+        scene_rng,
+        &opts.ranges,
+        view.look_at,
+        view.half_view * 1.2,
+    )))
 }
 
 /// The carcass group: each planned carcass's variety (family, size, parts, skin marks,
