@@ -41,7 +41,31 @@ pub struct Run<'a> {
     pub val_inputs: std::sync::OnceLock<Option<InputCache>>,
 }
 
-impl Run<'_> {
+impl<'a> Run<'a> {
+    /// The run of `cfg` in `run_dir` on `real` split as `split`, a model of `mcfg` at
+    /// `input` px evaluated on `base`.
+    pub fn new(
+        cfg: &'a Config,
+        run_dir: &'a Path,
+        real: &'a RealSet,
+        split: &'a Split,
+        mcfg: &'a DetectorConfig,
+        base: &'a Device,
+        input: usize,
+    ) -> Run<'a> {
+        Run {
+            cfg,
+            run_dir,
+            real,
+            split,
+            mcfg,
+            class_names: real.class_names(),
+            base,
+            input,
+            val_inputs: Default::default(),
+        }
+    }
+
     pub fn header(&self, st: &TrainState, epoch: usize, val: Option<Stats>) -> Header {
         Header {
             format: FORMAT,

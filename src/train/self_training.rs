@@ -66,19 +66,21 @@ pub struct SelfTraining {
     pub set: UnlabeledSet,
     teacher: Option<Detector>,
     pub records: Vec<SelfTrainingRecord>,
+    /// A resumed run: the epoch (0-based) it continues with.
+    resumed_at: Option<usize>,
 }
 
 impl SelfTraining {
     /// `None` without `[data.unlabeled]`; else the scanned folder (errors name a missing
     /// folder, no images, an unreadable image) and the checkpoint teacher, loaded on
-    /// `base` and checked to have `num_classes` classes. Records of epochs up to `done`
-    /// (a resumed run's) are kept from `run_dir`.
+    /// `base` and checked to have `num_classes` classes. A run resumed after `resumed`
+    /// epochs keeps their records from `run_dir`.
     pub fn for_run(
         cfg: &Config,
         num_classes: usize,
         base: &Device,
         run_dir: &Path,
-        done: usize,
+        resumed: Option<usize>,
     ) -> Result<Option<SelfTraining>> {
         let Some(u) = &cfg.data.unlabeled else {
             return Ok(None);
@@ -102,13 +104,14 @@ impl SelfTraining {
         };
         let records = read_records(run_dir)?
             .into_iter()
-            .filter(|r| r.epoch <= done)
+            .filter(|r| r.epoch <= resumed.unwrap_or(0))
             .collect();
         Ok(Some(SelfTraining {
             cfg: st,
             set,
             teacher,
             records,
+            resumed_at: resumed,
         }))
     }
 
@@ -138,20 +141,20 @@ impl SelfTraining {
         )
     }
 
-    /// Before `epoch` (0-based; `resumed_here`: the first epoch of a resumed run): new
-    /// pseudo-labels when the epoch labels, else `None` (the current ones stay). The
-    /// EMA teacher is `st`'s evaluated model, in the run's precision, on `base`.
+    /// Before `epoch` (0-based): new pseudo-labels when the epoch labels (or is the first
+    /// of a resumed run past `start_epoch`), else `None` (the current ones stay). The EMA
+    /// teacher is `st`'s evaluated model, in the run's precision, on `base`.
     pub fn labels_before(
         &self,
         cfg: &Config,
         epoch: usize,
-        resumed_here: bool,
         st: &TrainState,
         input: u32,
         base: &Device,
     ) -> Result<Option<PseudoLabels>> {
         let epochs = cfg.train.epochs;
         let first = self.cfg.first_epoch(epochs);
+        let resumed_here = self.resumed_at == Some(epoch);
         let due = self.cfg.labels_at(epoch, epochs) || (resumed_here && epoch > first);
         if !due {
             return Ok(None);
@@ -178,19 +181,17 @@ impl SelfTraining {
 
     /// Before `epoch`: labels when due (see [`Self::labels_before`]) and hands the new
     /// labels to `loader`, saying what they are; returns the seconds labelling took.
-    #[allow(clippy::too_many_arguments)]
     pub fn before_epoch(
         &self,
         cfg: &Config,
         epoch: usize,
-        resumed_here: bool,
         st: &TrainState,
         loader: &mut Loader,
         base: &Device,
         say: &dyn Fn(String),
     ) -> Result<Option<f64>> {
         let t0 = Instant::now();
-        let Some(p) = self.labels_before(cfg, epoch, resumed_here, st, loader.input, base)? else {
+        let Some(p) = self.labels_before(cfg, epoch, st, loader.input, base)? else {
             return Ok(None);
         };
         let secs = t0.elapsed().as_secs_f64();
@@ -206,15 +207,18 @@ impl SelfTraining {
         Ok(Some(secs))
     }
 
-    /// Records `epoch` (0-based) in `<run_dir>/self_training.jsonl`.
+    /// Records `epoch` (0-based), labelled before it in `labelled_in` seconds (if it
+    /// was) and trained on `items` pseudo-labelled items with `loader`'s labels, in
+    /// `<run_dir>/self_training.jsonl`.
     pub fn record(
         &mut self,
         run_dir: &Path,
         epoch: usize,
-        pseudo: Option<&PseudoLabels>,
+        loader: &Loader,
         labelled_in: Option<f64>,
         items: usize,
     ) -> Result<()> {
+        let pseudo = loader.pseudo.as_ref();
         self.records.push(SelfTrainingRecord {
             epoch: epoch + 1,
             labelled: labelled_in.is_some(),

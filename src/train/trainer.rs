@@ -81,18 +81,9 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
     }
     say(model_line(&cfg, &mcfg, &st, input));
     let loss_names = st.model.loss_names();
-    let run = Run {
-        cfg: &cfg,
-        run_dir: &run_dir,
-        real: &real,
-        split: &split,
-        mcfg: &mcfg,
-        class_names: real.class_names(),
-        base: &base,
-        input,
-        val_inputs: Default::default(),
-    };
-    let mut selftrain = SelfTraining::for_run(&cfg, real.num_classes(), &base, &run_dir, st.epoch)?;
+    let run = Run::new(&cfg, &run_dir, &real, &split, &mcfg, &base, input);
+    let resumed = resume.is_some().then_some(st.epoch);
+    let mut selftrain = SelfTraining::for_run(&cfg, real.num_classes(), &base, &run_dir, resumed)?;
     if let Some(s) = &selftrain {
         say(s.describe(cfg.train.epochs, cfg.train.batch));
     }
@@ -103,13 +94,9 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let (mut train_imgs, mut train_secs) = (0usize, 0f64);
     let guard_names: Vec<&str> = loss_names.iter().copied().chain(["total"]).collect();
     let mut guard = DivergenceGuard::new(&guard_names);
-    let resumed_at = st.epoch;
     for epoch in st.epoch..cfg.train.epochs {
         let labelled = match &selftrain {
-            Some(s) => {
-                let here = resume.is_some() && epoch == resumed_at;
-                s.before_epoch(&cfg, epoch, here, &st, &mut loader, &base, &say)?
-            }
+            Some(s) => s.before_epoch(&cfg, epoch, &st, &mut loader, &base, &say)?,
             None => None,
         };
         let te = Instant::now();
@@ -125,13 +112,7 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
         )?;
         train_imgs += steps.images;
         if let Some(s) = &mut selftrain {
-            s.record(
-                &run_dir,
-                epoch,
-                loader.pseudo.as_ref(),
-                labelled,
-                steps.pseudo_items,
-            )?;
+            s.record(&run_dir, epoch, &loader, labelled, steps.pseudo_items)?;
         }
         if let Some(step) = steps.interrupted {
             return Err(run.save_interrupted(&st, epoch, step));
