@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Scores one checkpoint for issue 38: segm/bbox stats on the home test split and on
+# both cross-domain sets (eval --json), and detections per carcass-free photo of
+# bench/negatives/ above 0.25 and 0.5 (predict's images.json).
+#   bench/negatives/score.sh CHICKTRAIN CHECKPOINT OUT
+# Run from the repository root.
+set -euo pipefail
+ct=$1 ckpt=$2 out=$3
+mkdir -p "$out"
+"$ct" eval --checkpoint "$ckpt" --split test --json > "$out/home_test.json"
+"$ct" eval --checkpoint "$ckpt" --data bench/crossdomain/crossdomain.toml --split test --json > "$out/crossdomain.json"
+"$ct" eval --checkpoint "$ckpt" --data bench/crossdomain2/crossdomain2.toml --split test --json > "$out/crossdomain2.json"
+for conf in 0.25 0.5; do
+  "$ct" predict --checkpoint "$ckpt" --input bench/negatives --out "$out/pred_$conf" --conf "$conf" > /dev/null
+done
+python3 bench/negatives/count.py "$out/pred_0.25/images.json" "$out/pred_0.5/images.json" > "$out/negatives.txt"
+cat "$out/negatives.txt"
