@@ -14,7 +14,7 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 mod data;
-mod model;
+pub mod model;
 mod randomize;
 mod shipped;
 mod train;
@@ -271,25 +271,7 @@ impl Config {
                 );
             }
         }
-        let (kind, max_freeze, stages) = match self.model.kind() {
-            ModelKind::Yolo => ("yolo", 23, "ultralytics layer indices; 23 is the head"),
-            ModelKind::Maskrcnn => (
-                "maskrcnn",
-                5,
-                "1 = stem, 2–5 = stem and the first 1–4 ResNet stages",
-            ),
-            ModelKind::Mask2former => (
-                "mask2former",
-                5,
-                "1 = stem, 2–5 = stem and the first 1–4 ResNet stages",
-            ),
-        };
-        if self.train.freeze > max_freeze {
-            bail!(
-                "train.freeze = {} must be at most {max_freeze} for model.kind = \"{kind}\" ({stages})",
-                self.train.freeze
-            );
-        }
+        self.model.validate_freeze(self.train.freeze)?;
         Ok(())
     }
 }
