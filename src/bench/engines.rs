@@ -13,6 +13,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use super::variant::Variant;
 use crate::data::ellipses::ellipse_batch;
+use crate::infer::detector::DetectorConfig;
 use crate::model::onnx::engine::{set_threads, TractEngine};
 use crate::model::onnx::graph::encode;
 use crate::model::yolo::onnx::{export_yolo, ultralytics_output0, OnnxExportOptions};
@@ -49,7 +50,7 @@ pub fn time_engines(
     repeats: usize,
     save: Option<&Path>,
 ) -> Result<EngineRow> {
-    let Some(cfg) = variant.yolo_config(size) else {
+    let DetectorConfig::Yolo(cfg) = variant.config(size) else {
         bail!("bench engines: {variant} is not a YOLO variant (only YOLO-seg exports to ONNX)");
     };
     if size < 32 || size % 32 != 0 || repeats == 0 {

@@ -3,6 +3,8 @@
 //! model-worker` child runs ([`super::worker`] keeps every row in a fresh process, so the
 //! peak-memory reading here is that row's alone).
 //!
+//! Every family is timed by the same code ([`Timer`]), through what its `Family`
+//! implementation says a batch-1 inference and a training probe are:
 //! - **latency**: batch-1 forward pass until the outputs are on the host, after warm-up
 //!   runs; YOLO with BatchNorm folded (as deployed), its box decoding and NMS excluded
 //!   (ultralytics' "inference" time); Mask R-CNN's `forward_infer`, which includes its
@@ -28,8 +30,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::ellipses::ellipse_batch;
 use crate::data::targets::Targets;
+use crate::infer::detector::ConfigVisitor;
+use crate::model::family::{Family, TrainingLoss};
 use crate::model::summary::ModelSummary;
-use crate::model::yolo::loss::{yolo_loss, LossWeights};
 use crate::util::stats::percentile;
 use crate::util::tensor::to_host;
 
@@ -163,11 +166,12 @@ pub fn measure(variant: &Variant, size: usize, e: Effort, device: &Device) -> Re
         targets,
         optim,
     };
-    let t = match variant {
-        Variant::Yolo { .. } => time_yolo(variant, size, e, &ad, inputs)?,
-        Variant::MaskRcnn { .. } => time_maskrcnn(variant, size, e, &ad, inputs)?,
-        Variant::Mask2Former { .. } => time_mask2former(variant, size, e, &ad, inputs)?,
-    };
+    let t = variant.config(size).visit(Timer {
+        size,
+        e,
+        ad: &ad,
+        inputs,
+    })?;
     Ok(Measurement {
         variant: variant.to_string(),
         size,
@@ -231,118 +235,52 @@ fn time_train_steps<M: Module>(
     })
 }
 
-/// The two-stage and query-based families return one detection list per image; a batch
-/// of one must give one.
-fn one_result(n: usize, family: &str) -> Result<()> {
-    if n != 1 {
-        bail!("{family} returned {n} results for 1 image");
+/// The timing of one family's variant ([`DetectorConfig::visit`]): batch-1 inference of
+/// the family's `bench_model` (YOLO fused, the others eval-mode), then training steps of
+/// the model with its real loss, the random draws of all steps from one stream seeded 0.
+struct Timer<'a> {
+    size: usize,
+    e: Effort,
+    ad: &'a Device,
+    inputs: Inputs,
+}
+
+impl ConfigVisitor for Timer<'_> {
+    type Out = Result<Timed>;
+    fn visit<F: Family>(self, cfg: &F::Config) -> Result<Timed> {
+        let Timer {
+            size,
+            e,
+            ad,
+            inputs,
+        } = self;
+        let Inputs {
+            x1,
+            xb,
+            targets,
+            mut optim,
+        } = inputs;
+        let model = F::build(cfg, ad);
+        let summary = model.summary_at(size);
+        let infer = model.bench_model();
+        let lat = time_runs(e.warmup, e.repeats, || infer.bench_forward(x1.clone()))?;
+        drop(infer);
+        let infer_peak = peak_rss_mib();
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let steps = time_train_steps(
+            e.train_steps,
+            model,
+            &mut optim,
+            |m| m.train_loss(xb.clone(), &targets, &mut rng).into_total(),
+            |m| m.probe(),
+        )?;
+        Ok(Timed {
+            summary,
+            infer_peak,
+            lat,
+            steps,
+        })
     }
-    Ok(())
-}
-
-/// A YOLO variant: fused (BatchNorm-folded) batch-1 inference, then training steps of
-/// the unfused model with the real loss.
-fn time_yolo(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Result<Timed> {
-    let Inputs {
-        x1,
-        xb,
-        targets,
-        mut optim,
-    } = i;
-    let cfg = v.yolo_config(size).expect("a YOLO variant");
-    let model = cfg.init(ad);
-    let summary = model.summary(size);
-    let fused = model.valid().fuse();
-    let lat = time_runs(e.warmup, e.repeats, || {
-        let out = fused.forward(x1.clone());
-        let _ = to_host(out.cls_logits);
-        let _ = to_host(out.proto);
-        Ok(())
-    })?;
-    drop(fused);
-    let infer_peak = peak_rss_mib();
-    let w = LossWeights::default();
-    let steps = time_train_steps(
-        e.train_steps,
-        model,
-        &mut optim,
-        |m| yolo_loss(&m.forward(xb.clone()), &targets, &w).total,
-        |m| m.head.boxes[0].out.weight.val().sum(),
-    )?;
-    Ok(Timed {
-        summary,
-        infer_peak,
-        lat,
-        steps,
-    })
-}
-
-/// A Mask R-CNN variant: batch-1 `forward_infer` (proposals, boxes, mask probabilities), then
-/// training steps with the RPN + RoI losses.
-fn time_maskrcnn(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Result<Timed> {
-    let Inputs {
-        x1,
-        xb,
-        targets,
-        mut optim,
-    } = i;
-    let cfg = v.maskrcnn_config(size).expect("a Mask R-CNN variant");
-    let model = cfg.init(ad);
-    let summary = model.summary(size);
-    let eval = model.valid();
-    let lat = time_runs(e.warmup, e.repeats, || {
-        one_result(eval.forward_infer(x1.clone()).len(), "Mask R-CNN")
-    })?;
-    drop(eval);
-    let infer_peak = peak_rss_mib();
-    let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let steps = time_train_steps(
-        e.train_steps,
-        model,
-        &mut optim,
-        |m| m.forward_train(xb.clone(), &targets.images, &mut rng).total,
-        |m| m.box_head.cls_score.weight.val().sum(),
-    )?;
-    Ok(Timed {
-        summary,
-        infer_peak,
-        lat,
-        steps,
-    })
-}
-
-/// A Mask2Former variant: batch-1 `forward_infer` (network and top-k postprocess), then
-/// training steps with the set criterion of all decoder layers.
-fn time_mask2former(v: &Variant, size: usize, e: Effort, ad: &Device, i: Inputs) -> Result<Timed> {
-    let Inputs {
-        x1,
-        xb,
-        targets,
-        mut optim,
-    } = i;
-    let cfg = v.mask2former_config(size).expect("a Mask2Former variant");
-    let model = cfg.init(ad);
-    let summary = model.summary(size);
-    let eval = model.valid();
-    let lat = time_runs(e.warmup, e.repeats, || {
-        one_result(eval.forward_infer(x1.clone()).len(), "Mask2Former")
-    })?;
-    drop(eval);
-    let infer_peak = peak_rss_mib();
-    let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let steps = time_train_steps(
-        e.train_steps,
-        model,
-        &mut optim,
-        |m| m.forward_train(xb.clone(), &targets.images, &mut rng).total,
-        |m| m.transformer_decoder.class_embed.weight.val().sum(),
-    )?;
-    Ok(Timed {
-        summary,
-        infer_peak,
-        lat,
-        steps,
-    })
 }
 
 #[cfg(test)]

@@ -14,7 +14,7 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 mod data;
-mod model;
+pub mod model;
 mod negatives;
 mod randomize;
 mod self_training;
@@ -283,25 +283,7 @@ impl Config {
                 .validate(self.train.epochs, self.train.batch)?,
             (None, None) => {}
         }
-        let (kind, max_freeze, stages) = match self.model.kind() {
-            ModelKind::Yolo => ("yolo", 23, "ultralytics layer indices; 23 is the head"),
-            ModelKind::Maskrcnn => (
-                "maskrcnn",
-                5,
-                "1 = stem, 2–5 = stem and the first 1–4 ResNet stages",
-            ),
-            ModelKind::Mask2former => (
-                "mask2former",
-                5,
-                "1 = stem, 2–5 = stem and the first 1–4 ResNet stages",
-            ),
-        };
-        if self.train.freeze > max_freeze {
-            bail!(
-                "train.freeze = {} must be at most {max_freeze} for model.kind = \"{kind}\" ({stages})",
-                self.train.freeze
-            );
-        }
+        self.model.validate_freeze(self.train.freeze)?;
         Ok(())
     }
 }

@@ -6,8 +6,12 @@
 //! Coordinates are continuous with pixel centres at `i + 0.5`, so a quarter turn of a
 //! square image maps pixel centres onto pixel centres and is exact.
 
-use image::{Rgb, RgbImage};
+use std::borrow::Cow;
 
+use image::{Rgb, RgbImage};
+use rand::Rng;
+
+use super::augment::step::{Augment, AugmentState, MIN_INSTANCE_PX};
 use super::dataset::{Instance, Sample};
 use super::letterbox::PAD_GREY;
 use crate::annotations::mask::Mask;
@@ -150,6 +154,51 @@ pub fn warp(s: &Sample, a: &Affine, out: (u32, u32), min_area: u64) -> Sample {
         })
         .collect();
     Sample { image, instances }
+}
+
+/// The pipeline's affine warp: rotation uniform in ±`degrees`, scale in `1 ± scale`,
+/// shift in ±`translate` of the item's size per axis, each drawn from the second stream
+/// only when on; after a mosaic it maps the canvas back to the item's size (so it runs
+/// whenever `mosaic` is on, even with the three ranges 0).
+pub struct RandomAffine {
+    pub degrees: f64,
+    pub scale: f64,
+    pub translate: f64,
+    /// Whether the warp can be other than the identity (`AugmentConfig::warps`).
+    pub on: bool,
+}
+
+impl Augment for RandomAffine {
+    fn name(&self) -> &'static str {
+        "affine"
+    }
+    fn apply<'s>(&self, s: Cow<'s, Sample>, st: &mut AugmentState) -> Cow<'s, Sample> {
+        if !self.on {
+            return s;
+        }
+        let dims = s.image.dimensions();
+        let (from, (w, h)) = st.canvas.unwrap_or((dims, dims));
+        let degrees = if self.degrees > 0.0 {
+            st.extra.random_range(-self.degrees..=self.degrees)
+        } else {
+            0.0
+        };
+        let scale = if self.scale > 0.0 {
+            st.extra.random_range(1.0 - self.scale..=1.0 + self.scale)
+        } else {
+            1.0
+        };
+        let shift = if self.translate > 0.0 {
+            (
+                st.extra.random_range(-self.translate..=self.translate) * w as f64,
+                st.extra.random_range(-self.translate..=self.translate) * h as f64,
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        let a = Affine::about_centre(from, (w, h), degrees, scale, shift);
+        Cow::Owned(warp(&s, &a, (w, h), MIN_INSTANCE_PX))
+    }
 }
 
 #[cfg(test)]

@@ -7,9 +7,12 @@
 //! Why: a pile is instances occluding instances; pasting a carcass from another image
 //! makes new occlusion boundaries whose masks are exact by construction.
 
+use std::borrow::Cow;
+
 use image::RgbImage;
 use rand::Rng;
 
+use super::augment::step::{Augment, AugmentState, MIN_INSTANCE_PX};
 use super::dataset::{Instance, Sample};
 use crate::annotations::mask::Mask;
 
@@ -82,6 +85,22 @@ pub fn copy_paste<R: Rng>(dst: &Sample, src: &Sample, rng: &mut R, min_area: u64
         .collect();
     instances.extend(pasted);
     Sample { image, instances }
+}
+
+/// The pipeline's copy-paste: pastes from the item's copy-paste partner when it has one
+/// (drawn with probability `copy_paste` before loading), from the second stream.
+pub struct CopyPaste;
+
+impl Augment for CopyPaste {
+    fn name(&self) -> &'static str {
+        "copy_paste"
+    }
+    fn apply<'s>(&self, s: Cow<'s, Sample>, st: &mut AugmentState) -> Cow<'s, Sample> {
+        match st.partners.copy_paste {
+            Some(src) => Cow::Owned(copy_paste(&s, src, &mut st.extra, MIN_INSTANCE_PX)),
+            None => s,
+        }
+    }
 }
 
 #[cfg(test)]

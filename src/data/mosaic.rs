@@ -6,8 +6,12 @@
 //! Why: a crop of the canvas shows piles cut at arbitrary lines and more instances per
 //! image, which is what a camera over a conveyor sees at the edge of its view.
 
-use image::{Rgb, RgbImage};
+use std::borrow::Cow;
 
+use image::{Rgb, RgbImage};
+use rand::Rng;
+
+use super::augment::step::{Augment, AugmentState, MIN_INSTANCE_PX};
 use super::dataset::{Instance, Sample};
 use super::letterbox::PAD_GREY;
 use crate::annotations::mask::Mask;
@@ -59,6 +63,33 @@ pub fn mosaic(samples: &[&Sample], size: (u32, u32), centre: (u32, u32), min_are
         }
     }
     Sample { image, instances }
+}
+
+/// The pipeline's mosaic: with the item's three mosaic partners when it has them (drawn
+/// with probability `mosaic` before loading), around a centre drawn from the second
+/// stream; leaves the canvas size for the affine warp, which maps it back.
+pub struct Mosaic;
+
+impl Augment for Mosaic {
+    fn name(&self) -> &'static str {
+        "mosaic"
+    }
+    fn apply<'s>(&self, s: Cow<'s, Sample>, st: &mut AugmentState) -> Cow<'s, Sample> {
+        let partners = st.partners;
+        let Some(rest) = &partners.mosaic else {
+            return s;
+        };
+        let (w, h) = s.image.dimensions();
+        let centre = (
+            st.extra.random_range(w / 2..=w + w / 2),
+            st.extra.random_range(h / 2..=h + h / 2),
+        );
+        let mut tiles = vec![&*s];
+        tiles.extend(rest.iter().copied());
+        let tiled = mosaic(&tiles, (w, h), centre, MIN_INSTANCE_PX);
+        st.canvas = Some(((2 * w, 2 * h), (w, h)));
+        Cow::Owned(tiled)
+    }
 }
 
 #[cfg(test)]

@@ -3,157 +3,232 @@
 //! to [`Detection`]s for the shared COCO evaluation, summary. Everything else the trainer
 //! does (optimiser, EMA, clipping, checkpoints) works on any Burn [`Module`], so it serves
 //! every variant unchanged.
+//!
+//! This is where a model family is registered: one line in the [`families!`] list below
+//! (its [`Detector`] variant, which names its Burn record in checkpoints, and its
+//! [`DetectorConfig`] variant, which is its `model.kind` and its `[model]` table's
+//! `config::ModelConfig` variant). Every method here dispatches to the family's
+//! [`Family`] implementation in `model/<family>/family.rs`; nothing else in the crate
+//! matches on the families.
+
+use std::path::Path;
 
 use anyhow::{bail, Result};
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{Config, ModelConfig, ModelKind};
 use crate::data::targets::Targets;
-use crate::model::detection::{nms_detections, Detection};
-use crate::model::mask2former::{Mask2Former, Mask2FormerConfig, Mask2FormerLosses};
-use crate::model::maskrcnn::{MaskRcnn, MaskRcnnConfig, MaskRcnnLosses};
+use crate::model::detection::Detection;
+pub use crate::model::family::StepLoss;
+use crate::model::family::{
+    exporter, seeded_loss, ExportFormat, ExportRequest, Family, ForeignInit,
+};
+use crate::model::mask2former::{Mask2Former, Mask2FormerConfig};
+use crate::model::maskrcnn::{MaskRcnn, MaskRcnnConfig};
 use crate::model::summary::ModelSummary;
-use crate::model::yolo::loss::{yolo_loss, LossTerms, LossWeights};
-use crate::model::yolo::postprocess::postprocess;
+use crate::model::weights::{self, Applied, Format};
+pub use crate::model::yolo::family::{VAL_IOU, VAL_MAX_DET};
 use crate::model::yolo::{YoloSeg, YoloSegConfig};
 
-/// Validation postprocess settings of YOLO (ultralytics' val defaults; Mask R-CNN uses
-/// only `VAL_CONF`, below its own threshold).
+/// Validation score threshold (ultralytics' val default; Mask R-CNN applies its own,
+/// higher threshold first). YOLO's NMS IoU and detection cap are [`VAL_IOU`] and
+/// [`VAL_MAX_DET`].
 pub const VAL_CONF: f32 = 0.001;
-pub const VAL_IOU: f32 = 0.7;
-pub const VAL_MAX_DET: usize = 300;
 
-/// Model config of a checkpoint: the kind and everything needed to rebuild the weights.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "lowercase")]
-pub enum DetectorConfig {
-    Yolo(YoloSegConfig),
-    Maskrcnn(MaskRcnnConfig),
-    Mask2former(Mask2FormerConfig),
+/// A generic function over one family, called with the family of a [`DetectorConfig`]
+/// ([`DetectorConfig::visit`]): how code above the models (`bench::measure`) runs
+/// family-generic code without matching on the families.
+pub trait ConfigVisitor {
+    type Out;
+    fn visit<F: Family>(self, config: &F::Config) -> Self::Out;
 }
 
-/// A trainable instance-segmentation model.
-#[derive(Module, Debug)]
-pub enum Detector {
-    Yolo(YoloSeg),
-    MaskRcnn(MaskRcnn),
-    Mask2Former(Mask2Former),
+/// The registration list: `DetectorVariant(ModelType), ConfigVariant(ConfigType);` per
+/// family. It defines [`DetectorConfig`] and [`Detector`] and the dispatch of every method
+/// below to the family's [`Family`] implementation; the arms are one-liners on purpose
+/// (the logic is the family's, or in the plain methods after the list).
+macro_rules! families {
+    ($($V:ident($M:ty), $C:ident($MC:ty);)+) => {
+        /// Model config of a checkpoint: the kind and everything needed to rebuild the
+        /// weights.
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[serde(tag = "kind", rename_all = "lowercase")]
+        pub enum DetectorConfig {
+            $($C($MC),)+
+        }
+
+        /// A trainable instance-segmentation model.
+        #[derive(Module, Debug)]
+        pub enum Detector {
+            $($V($M),)+
+        }
+
+        impl DetectorConfig {
+            /// Calls `v` with this config's family.
+            pub fn visit<V: ConfigVisitor>(&self, v: V) -> V::Out {
+                match self { $(DetectorConfig::$C(c) => v.visit::<$M>(c),)+ }
+            }
+            fn of_section(m: &ModelConfig, input: usize, nc: usize) -> Self {
+                match m { $(ModelConfig::$C(m) => DetectorConfig::$C(<$M>::config(m, input, nc)),)+ }
+            }
+            pub fn kind(&self) -> ModelKind {
+                match self { $(DetectorConfig::$C(_) => ModelKind::$C,)+ }
+            }
+            /// The family's name in messages (`"Mask R-CNN"`).
+            pub fn family_name(&self) -> &'static str {
+                match self { $(DetectorConfig::$C(_) => <$M>::NAME,)+ }
+            }
+            pub fn num_classes(&self) -> usize {
+                match self { $(DetectorConfig::$C(c) => <$M>::num_classes_of(c),)+ }
+            }
+            /// Square inference input size (px).
+            pub fn input_size(&self) -> usize {
+                match self { $(DetectorConfig::$C(c) => <$M>::input_size_of(c),)+ }
+            }
+            pub fn set_input_size(&mut self, size: usize) {
+                match self { $(DetectorConfig::$C(c) => <$M>::set_input_size(c, size),)+ }
+            }
+            pub fn init(&self, device: &Device) -> Detector {
+                match self { $(DetectorConfig::$C(c) => Detector::$V(<$M>::build(c, device)),)+ }
+            }
+            /// Module-path prefixes of the stages `train.freeze = n` freezes (see
+            /// `model::freeze`).
+            pub fn frozen_prefixes(&self, n: usize) -> Result<Vec<String>> {
+                match self { $(DetectorConfig::$C(_) => <$M>::frozen_prefixes(n),)+ }
+            }
+            /// One line naming the architecture.
+            pub fn describe(&self) -> String {
+                match self { $(DetectorConfig::$C(c) => <$M>::describe(c),)+ }
+            }
+            /// The `bench models` variant name this config is timed as.
+            pub fn variant_name(&self) -> String {
+                match self { $(DetectorConfig::$C(c) => <$M>::variant_name(c),)+ }
+            }
+            /// The one-class config of the `bench models` variant this config is timed as.
+            pub fn variant_config(&self) -> Self {
+                match self { $(DetectorConfig::$C(c) => DetectorConfig::$C(<$M>::variant_config(c)),)+ }
+            }
+            /// The one-class config of a `bench models` variant name, if a family knows
+            /// the name (an error: a family's prefix with a bad option).
+            pub fn parse_variant(name: &str) -> Option<Result<Self>> {
+                None$(.or_else(|| <$M>::parse_variant(name).map(|r| r.map(DetectorConfig::$C))))+
+            }
+            /// Whether this config's family has the export `format`.
+            pub fn exports(&self, format: ExportFormat) -> bool {
+                match self { $(DetectorConfig::$C(_) => exporter::<$M>(format).is_some(),)+ }
+            }
+            /// The families that have the export `format` (their names, for messages).
+            pub fn exporters(format: ExportFormat) -> Vec<&'static str> {
+                let mut names = Vec::new();
+                $(if exporter::<$M>(format).is_some() { names.push(<$M>::NAME); })+
+                names
+            }
+            /// Every family's variant names, for help and error text.
+            pub fn variant_help() -> String {
+                [$(<$M>::VARIANT_HELP,)+].join(", or ")
+            }
+        }
+
+        /// `--smoke`: the family's shrink of its `[model]` table.
+        pub fn smoke_section(m: &mut ModelConfig) {
+            match m { $(ModelConfig::$C(m) => <$M>::smoke(m),)+ }
+        }
+
+        impl Detector {
+            /// Names of the loss terms, as logged in `metrics.jsonl` (`loss.<name>`).
+            pub fn loss_names(&self) -> &'static [&'static str] {
+                match self { $(Detector::$V(_) => <$M>::LOSS_NAMES,)+ }
+            }
+            /// Training loss of a batch. `images` are `[B, 3, H, W]` in `[0, 1]` (Mask R-CNN
+            /// and Mask2Former normalise inside); `sample_seed` drives Mask R-CNN's anchor
+            /// and RoI sampling and Mask2Former's point sampling, so a step does not depend
+            /// on what ran before it.
+            pub fn loss(&self, images: Tensor<4>, targets: &Targets, sample_seed: u64) -> StepLoss {
+                match self { $(Detector::$V(m) => seeded_loss(m, images, targets, sample_seed),)+ }
+            }
+            /// [`Self::predict`] and the seconds of the network alone: YOLO's forward pass
+            /// up to its output tensors (box decoding and NMS excluded); Mask R-CNN's
+            /// `forward_infer` whole (its proposal, NMS and head stages interleave with the
+            /// network); Mask2Former's `forward_infer` whole (network and top-k
+            /// postprocess). Wall clock on the eager CPU backends; a lazy GPU backend would
+            /// move time into the postprocess.
+            pub fn predict_timed(&self, images: Tensor<4>, conf: f32) -> (Vec<Vec<Detection>>, f64) {
+                match self { $(Detector::$V(m) => m.predict_timed(images, conf),)+ }
+            }
+            /// [`Self::predict`] with the NMS IoU and detection cap of `predict --iou
+            /// --max-det`: YOLO's postprocess runs at them; Mask R-CNN's and Mask2Former's
+            /// detections (their own NMS already applied) go through
+            /// [`crate::model::detection::nms_detections`] at them.
+            pub fn predict_nms(&self, images: Tensor<4>, conf: f32, iou: f32, max_det: usize) -> Vec<Vec<Detection>> {
+                match self { $(Detector::$V(m) => m.predict_nms(images, conf, iou, max_det),)+ }
+            }
+            pub fn summary(&self, input: usize) -> ModelSummary {
+                match self { $(Detector::$V(m) => m.summary_at(input),)+ }
+            }
+            /// Every tensor of `source` (a model of the same family) loaded into this one;
+            /// with another class count the class-dependent ones keep their initialisation.
+            pub fn apply_same_family(self, source: &Detector, origin: &str) -> Result<(Detector, Applied)> {
+                match (self, source) {
+                    $((Detector::$V(m), Detector::$V(s)) => {
+                        let (m, a) = weights::apply(m, weights::collect(s), &<$M>::class_dependent, origin)?;
+                        Ok((Detector::$V(m), a))
+                    })+
+                    #[allow(unreachable_patterns)]
+                    _ => bail!("{origin}: weights of one family cannot start another"),
+                }
+            }
+            /// This model (of family `config`) in the export `format`; `None` when the
+            /// family has no such format.
+            pub fn export(&self, config: &DetectorConfig, format: ExportFormat, r: &ExportRequest) -> Option<Result<String>> {
+                match (self, config) {
+                    $((Detector::$V(m), DetectorConfig::$C(c)) => exporter::<$M>(format).map(|f| f(m, c, r)),)+
+                    #[allow(unreachable_patterns)]
+                    _ => Some(Err(anyhow::anyhow!("{}: the weights are not of the model config's family", r.checkpoint.display()))),
+                }
+            }
+            /// `model.init` from a file of another framework, as the family reads it.
+            pub fn load_foreign(self, config: &DetectorConfig, path: &Path, format: Format, origin: &str) -> Result<ForeignInit<Detector>> {
+                match (self, config) {
+                    $((Detector::$V(m), DetectorConfig::$C(c)) => {
+                        let f = m.load_foreign(c, path, format, origin)?;
+                        Ok(ForeignInit { model: Detector::$V(f.model), applied: f.applied, what: f.what, fresh_why: f.fresh_why })
+                    })+
+                    #[allow(unreachable_patterns)]
+                    _ => bail!("{origin}: the model config is not the model's family"),
+                }
+            }
+        }
+    };
 }
 
-/// Loss of one training batch: the tensor to back-propagate and the host values of its
-/// named terms (in [`Detector::loss_names`] order) and of the total.
-pub struct StepLoss {
-    pub total: Tensor<1>,
-    pub terms: Vec<f32>,
-    pub total_value: f32,
+families! {
+    Yolo(YoloSeg), Yolo(YoloSegConfig);
+    MaskRcnn(MaskRcnn), Maskrcnn(MaskRcnnConfig);
+    Mask2Former(Mask2Former), Mask2former(Mask2FormerConfig);
 }
 
 impl DetectorConfig {
     /// The model of run config `cfg` with `nc` classes.
     pub fn from_config(cfg: &Config, nc: usize) -> Result<Self> {
-        let m = &cfg.model;
         if nc == 0 {
             bail!("the data has no categories to train on");
         }
-        let input = cfg.data.image_size as usize;
-        Ok(match m {
-            ModelConfig::Yolo(m) => DetectorConfig::Yolo(YoloSegConfig::from_config(m, input, nc)),
-            ModelConfig::Maskrcnn(m) => {
-                DetectorConfig::Maskrcnn(MaskRcnnConfig::from_config(m, input, nc))
-            }
-            ModelConfig::Mask2former(m) => {
-                DetectorConfig::Mask2former(Mask2FormerConfig::from_config(m, input, nc))
-            }
-        })
-    }
-
-    pub fn kind(&self) -> ModelKind {
-        match self {
-            DetectorConfig::Yolo(_) => ModelKind::Yolo,
-            DetectorConfig::Maskrcnn(_) => ModelKind::Maskrcnn,
-            DetectorConfig::Mask2former(_) => ModelKind::Mask2former,
-        }
-    }
-
-    pub fn num_classes(&self) -> usize {
-        match self {
-            DetectorConfig::Yolo(c) => c.num_classes,
-            DetectorConfig::Maskrcnn(c) => c.num_classes,
-            DetectorConfig::Mask2former(c) => c.num_classes,
-        }
-    }
-
-    /// Square inference input size (px).
-    pub fn input_size(&self) -> usize {
-        match self {
-            DetectorConfig::Yolo(c) => c.input_size,
-            DetectorConfig::Maskrcnn(c) => c.input_size,
-            DetectorConfig::Mask2former(c) => c.input_size,
-        }
-    }
-
-    pub fn init(&self, device: &Device) -> Detector {
-        match self {
-            DetectorConfig::Yolo(c) => Detector::Yolo(c.init(device)),
-            DetectorConfig::Maskrcnn(c) => Detector::MaskRcnn(c.init(device)),
-            DetectorConfig::Mask2former(c) => Detector::Mask2Former(c.init(device)),
-        }
-    }
-
-    /// Module-path prefixes of the stages `train.freeze = n` freezes (see `model::freeze`).
-    pub fn frozen_prefixes(&self, n: usize) -> Result<Vec<String>> {
-        match self {
-            DetectorConfig::Yolo(_) => crate::model::freeze::yolo_prefixes(n),
-            DetectorConfig::Maskrcnn(_) => crate::model::freeze::maskrcnn_prefixes(n),
-            // Same ResNet, same module paths.
-            DetectorConfig::Mask2former(_) => crate::model::freeze::maskrcnn_prefixes(n),
-        }
-    }
-
-    /// One line naming the architecture.
-    pub fn describe(&self) -> String {
-        match self {
-            DetectorConfig::Yolo(c) => format!(
-                "YOLO-seg {} {:?}, c2psa {}, width ×{}, {} classes",
-                c.scale.name(),
-                c.levels,
-                c.c2psa,
-                c.width_mult,
-                c.num_classes
-            ),
-            DetectorConfig::Maskrcnn(c) => format!(
-                "Mask R-CNN R{}-FPN, width ×{}, FPN {}, RoIs {}/image, {} classes",
-                c.depth, c.width_mult, c.fpn_channels, c.roi.batch_per_image, c.num_classes
-            ),
-            DetectorConfig::Mask2former(c) => format!(
-                "Mask2Former R{} (FPN pixel decoder), width ×{}, {} queries, {} layers × {} wide, {} points, {} classes",
-                c.depth,
-                c.width_mult,
-                c.queries,
-                c.dec_layers,
-                c.hidden_dim,
-                c.criterion.points,
-                c.num_classes
-            ),
-        }
+        Ok(Self::of_section(
+            &cfg.model,
+            cfg.data.image_size as usize,
+            nc,
+        ))
     }
 
     /// Why a checkpoint's model cannot continue or replace this one, if it cannot.
     pub fn mismatch(&self, other: &DetectorConfig) -> Option<String> {
-        let name = |k: ModelKind| match k {
-            ModelKind::Yolo => "model.kind = \"yolo\"",
-            ModelKind::Maskrcnn => "model.kind = \"maskrcnn\"",
-            ModelKind::Mask2former => "model.kind = \"mask2former\"",
-        };
         if self.kind() != other.kind() {
             return Some(format!(
-                "it holds a {} model, the config asks for {}",
-                name(other.kind()),
-                name(self.kind())
+                "it holds a model.kind = \"{}\" model, the config asks for model.kind = \"{}\"",
+                other.kind().name(),
+                self.kind().name()
             ));
         }
         if self.num_classes() != other.num_classes() {
@@ -168,116 +243,10 @@ impl DetectorConfig {
 }
 
 impl Detector {
-    /// Names of the loss terms, as logged in `metrics.jsonl` (`loss.<name>`).
-    pub fn loss_names(&self) -> &'static [&'static str] {
-        match self {
-            Detector::Yolo(_) => &LossTerms::NAMES,
-            Detector::MaskRcnn(_) => &MaskRcnnLosses::NAMES,
-            Detector::Mask2Former(_) => &Mask2FormerLosses::NAMES,
-        }
-    }
-
-    /// Training loss of a batch. `images` are `[B, 3, H, W]` in `[0, 1]` (Mask R-CNN
-    /// and Mask2Former normalise inside); `sample_seed` drives Mask R-CNN's anchor and RoI
-    /// sampling and Mask2Former's point sampling, so a step does not depend on what ran
-    /// before it.
-    pub fn loss(&self, images: Tensor<4>, targets: &Targets, sample_seed: u64) -> StepLoss {
-        match self {
-            Detector::Yolo(m) => {
-                let out = m.forward(images);
-                let l = yolo_loss(&out, targets, &LossWeights::default());
-                let v = l.values();
-                StepLoss {
-                    total: l.total,
-                    terms: v[..4].to_vec(),
-                    total_value: v[4],
-                }
-            }
-            Detector::MaskRcnn(m) => {
-                let mut rng = ChaCha8Rng::seed_from_u64(sample_seed);
-                let l = m.forward_train(images, &targets.images, &mut rng);
-                let v = l.values();
-                StepLoss {
-                    total: l.total,
-                    terms: v[..5].to_vec(),
-                    total_value: v[5],
-                }
-            }
-            Detector::Mask2Former(m) => {
-                let mut rng = ChaCha8Rng::seed_from_u64(sample_seed);
-                let l = m.forward_train(images, &targets.images, &mut rng);
-                let v = l.values();
-                StepLoss {
-                    total: l.total,
-                    terms: v[..3].to_vec(),
-                    total_value: v[3],
-                }
-            }
-        }
-    }
-
     /// Detections per image with score ≥ `conf` (call on the eval-mode, plain-device model).
     /// Mask R-CNN applies its own score threshold (`roi.score_thresh`, 0.05) first.
     pub fn predict(&self, images: Tensor<4>, conf: f32) -> Vec<Vec<Detection>> {
         self.predict_timed(images, conf).0
-    }
-
-    /// [`Self::predict`] with the NMS IoU and detection cap of `predict --iou --max-det`:
-    /// YOLO's postprocess runs at them; Mask R-CNN's and Mask2Former's detections (their
-    /// own NMS already applied) go through [`nms_detections`] at them.
-    pub fn predict_nms(
-        &self,
-        images: Tensor<4>,
-        conf: f32,
-        iou: f32,
-        max_det: usize,
-    ) -> Vec<Vec<Detection>> {
-        match self {
-            Detector::Yolo(m) => postprocess(&m.forward(images), conf, iou, max_det),
-            _ => self
-                .predict(images, conf)
-                .into_iter()
-                .map(|d| nms_detections(d, iou, max_det))
-                .collect(),
-        }
-    }
-
-    /// [`Self::predict`] and the seconds of the network alone: YOLO's forward pass up to
-    /// its output tensors (box decoding and NMS excluded); Mask R-CNN's `forward_infer`
-    /// whole (its proposal, NMS and head stages interleave with the network); Mask2Former's
-    /// `forward_infer` whole (network and top-k postprocess). Wall clock
-    /// on the eager CPU backends; a lazy GPU backend would move time into the postprocess.
-    pub fn predict_timed(&self, images: Tensor<4>, conf: f32) -> (Vec<Vec<Detection>>, f64) {
-        let t = std::time::Instant::now();
-        match self {
-            Detector::Yolo(m) => {
-                let out = m.forward(images);
-                let fwd = t.elapsed().as_secs_f64();
-                (postprocess(&out, conf, VAL_IOU, VAL_MAX_DET), fwd)
-            }
-            Detector::MaskRcnn(m) => {
-                let mut out = m.forward_infer(images);
-                for d in &mut out {
-                    d.retain(|x| x.score >= conf);
-                }
-                (out, t.elapsed().as_secs_f64())
-            }
-            Detector::Mask2Former(m) => {
-                let mut out = m.forward_infer(images);
-                for d in &mut out {
-                    d.retain(|x| x.score >= conf);
-                }
-                (out, t.elapsed().as_secs_f64())
-            }
-        }
-    }
-
-    pub fn summary(&self, input: usize) -> ModelSummary {
-        match self {
-            Detector::Yolo(m) => m.summary(input),
-            Detector::MaskRcnn(m) => m.summary(input),
-            Detector::Mask2Former(m) => m.summary(input),
-        }
     }
 }
 

@@ -12,13 +12,17 @@
 //! - [`weights`]: weights from files (chicktrain checkpoints, PyTorch, safetensors) as
 //!   named snapshots, and the one loader that applies them with shape checks; `freeze`
 //!   (the first N stages of either family).
-//! - [`onnx`]: the ONNX graph writer and the tract engine that runs exported files.
+//! - [`onnx`]: the ONNX graph writer, the tract engine that runs exported files, and the
+//!   reference file written beside an export.
+//! - [`family`]: the interface every family implements (`model/<family>/family.rs`), so
+//!   that the rest of the crate reaches a family in one place (`infer::detector`).
 //!
 //! Models read their ground truth as [`crate::annotations::targets::Targets`] and import
 //! nothing of the renderer, the loader or the trainer (only the foundation): every model is
 //! built from its own typed config.
 
 pub mod detection;
+pub mod family;
 pub mod freeze;
 pub mod instance_mask;
 pub mod layers;

@@ -5,9 +5,7 @@
 //! | file | model | what is loaded |
 //! |---|---|---|
 //! | chicktrain checkpoint (`.bpk`, any family) | same family | its `ema` weights (what it evaluates and ships), every tensor; with another class count the class-dependent ones are re-initialised and named |
-//! | PyTorch zip / safetensors | Mask R-CNN | a torchvision ImageNet ResNet (backbone) or `maskrcnn_resnet50_fpn` state dict ([`torchvision`]) |
-//! | PyTorch zip / safetensors | Mask2Former | the ResNet backbone of a torchvision ImageNet ResNet or Mask R-CNN state dict; the rest keeps its initialisation |
-//! | PyTorch zip / safetensors | YOLO | an ultralytics checkpoint or state dict ([`ultralytics`]); the class head is re-initialised for another class count, the mask head for a detection checkpoint |
+//! | PyTorch zip / safetensors | the family's own reader | what its `Family::load_foreign` (`model/<family>/family.rs`) reads: torchvision ResNet / Mask R-CNN state dicts (two-stage and query-based families, backbone or more), ultralytics checkpoints (YOLO); a family without one refuses by name |
 //!
 //! `--resume` ignores `model.init`: the run's `last.bpk` wins.
 
@@ -17,17 +15,16 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use burn::tensor::Device;
 
-use crate::model::mask2former;
-use crate::model::maskrcnn::{self, torchvision};
+use crate::model::family::ForeignInit;
 use crate::model::weights::{self, Applied, Format};
-use crate::model::yolo::{self, ultralytics};
 
 use crate::infer::checkpoint::Checkpoint;
 use crate::infer::detector::{Detector, DetectorConfig};
 
 /// `model`, with the weights of `path` loaded; the second value says what was loaded
 /// (printed by the trainer). `config` is `model`'s own (the ultralytics mapping needs
-/// its scale and width); `device` builds the source model of a checkpoint.
+/// its scale and width); `device` builds the source model of a checkpoint. A file of
+/// another framework is read by the family ([`crate::model::family::Family::load_foreign`]).
 pub fn load_init(
     model: Detector,
     config: &DetectorConfig,
@@ -43,24 +40,22 @@ pub fn load_init(
             &head[..head.len().min(8)]
         );
     };
-    // Why tensors may keep their initialisation, for the message.
-    let mut fresh_why = "the file's class count differs there";
-    let (model, applied, what) = match (format, model) {
-        (Format::Chicktrain, model) => {
+    let ForeignInit {
+        model,
+        applied,
+        what,
+        fresh_why,
+    } = match format {
+        Format::Chicktrain => {
             let ck = Checkpoint::load(path).with_context(|| origin.clone())?;
             let src = &ck.header.model;
             let want = config.kind();
             if src.kind() != want {
-                let name = |k| match k {
-                    crate::config::ModelKind::Yolo => "model.kind = \"yolo\"",
-                    crate::config::ModelKind::Maskrcnn => "model.kind = \"maskrcnn\"",
-                    crate::config::ModelKind::Mask2former => "model.kind = \"mask2former\"",
-                };
                 bail!(
-                    "{origin}: it holds a {} model ({}), the config asks for {}: weights of one family cannot start the other",
-                    name(src.kind()),
+                    "{origin}: it holds a model.kind = \"{}\" model ({}), the config asks for model.kind = \"{}\": weights of one family cannot start the other",
+                    src.kind().name(),
                     src.describe(),
-                    name(want)
+                    want.name()
                 );
             }
             let what = format!(
@@ -70,115 +65,16 @@ pub fn load_init(
                 ck.header.epoch
             );
             let source = ck.model("ema", device).with_context(|| origin.clone())?;
-            let (model, applied) = match (model, source) {
-                (Detector::Yolo(m), Detector::Yolo(s)) => {
-                    let (m, a) =
-                        weights::apply(m, weights::collect(&s), &yolo::class_dependent, &origin)?;
-                    (Detector::Yolo(m), a)
-                }
-                (Detector::MaskRcnn(m), Detector::MaskRcnn(s)) => {
-                    let (m, a) = weights::apply(
-                        m,
-                        weights::collect(&s),
-                        &maskrcnn::class_dependent,
-                        &origin,
-                    )?;
-                    (Detector::MaskRcnn(m), a)
-                }
-                (Detector::Mask2Former(m), Detector::Mask2Former(s)) => {
-                    let (m, a) = weights::apply(
-                        m,
-                        weights::collect(&s),
-                        &mask2former::class_dependent,
-                        &origin,
-                    )?;
-                    (Detector::Mask2Former(m), a)
-                }
-                _ => unreachable!("kinds checked above"),
-            };
-            (model, applied, what)
-        }
-        (Format::TorchLegacy | Format::TorchZip | Format::Safetensors, Detector::MaskRcnn(m)) => {
-            let tensors = weights::read_file(path, &["model", "state_dict"])
-                .with_context(|| origin.clone())?;
-            let nc = m.num_classes();
-            let mapped =
-                torchvision::map_state_dict(tensors, nc).with_context(|| origin.clone())?;
-            if mapped.kind == torchvision::TorchvisionKind::ResNet {
-                fresh_why = "an ImageNet ResNet file holds the backbone only";
+            let (model, applied) = model.apply_same_family(&source, &origin)?;
+            ForeignInit {
+                model,
+                applied,
+                what,
+                fresh_why: "the file's class count differs there",
             }
-            let what = match (mapped.kind, mapped.file_classes) {
-                (torchvision::TorchvisionKind::ResNet, _) => {
-                    format!("{}, torchvision ResNet (backbone only)", format.name())
-                }
-                (_, Some(k)) => format!(
-                    "{}, torchvision Mask R-CNN ({} classes with background)",
-                    format.name(),
-                    k
-                ),
-                (_, None) => format!("{}, torchvision Mask R-CNN", format.name()),
-            };
-            let (m, a) = weights::apply_named(
-                m,
-                mapped.snapshots,
-                &torchvision::class_dependent(mapped.kind),
-                &origin,
-                &mapped.file_keys,
-            )?;
-            (Detector::MaskRcnn(m), a, what)
         }
-        (
-            Format::TorchLegacy | Format::TorchZip | Format::Safetensors,
-            Detector::Mask2Former(m),
-        ) => {
-            // The backbone is the Mask R-CNN family's ResNet under the same paths: a
-            // torchvision ResNet or Mask R-CNN file loads into it, the rest stays fresh.
-            let tensors = weights::read_file(path, &["model", "state_dict"])
-                .with_context(|| origin.clone())?;
-            let mapped = torchvision::map_state_dict(tensors, m.num_classes())
-                .with_context(|| origin.clone())?;
-            fresh_why = "a torchvision file holds the ResNet backbone only";
-            let what = match mapped.kind {
-                torchvision::TorchvisionKind::ResNet => {
-                    format!("{}, torchvision ResNet (backbone)", format.name())
-                }
-                _ => format!("{}, torchvision Mask R-CNN (its backbone)", format.name()),
-            };
-            let snapshots = mapped
-                .snapshots
-                .into_iter()
-                .filter(|s| s.name.starts_with("backbone."))
-                .collect();
-            let (m, a) = weights::apply_named(
-                m,
-                snapshots,
-                &|p: &str| !p.starts_with("backbone."),
-                &origin,
-                &mapped.file_keys,
-            )?;
-            (Detector::Mask2Former(m), a, what)
-        }
-        (Format::TorchLegacy | Format::TorchZip | Format::Safetensors, Detector::Yolo(m)) => {
-            // ultralytics `.pt` (its `ema`, else `model`), a state dict or safetensors under
-            // ultralytics' key names; a detection checkpoint has no mask head, which keeps its
-            // fresh init like a class head of another class count.
-            let DetectorConfig::Yolo(cfg) = config else {
-                bail!("{origin}: the model config is not a YOLO config");
-            };
-            let w = ultralytics::read_ultralytics(path, cfg).with_context(|| origin.clone())?;
-            if !w.missing.is_empty() {
-                fresh_why =
-                    "a class count that differs, or a detection checkpoint without a mask head";
-            }
-            let what = format!(
-                "{}, ultralytics ({} classes)",
-                format.name(),
-                w.file_classes
-            );
-            let missing: std::collections::HashSet<String> = w.missing.iter().cloned().collect();
-            let keep = |p: &str| yolo::class_dependent(p) || missing.contains(p);
-            let (m, a) = weights::apply(m, w.snapshots, &keep, &origin)?;
-            (Detector::Yolo(m), a, what)
+        Format::TorchLegacy | Format::TorchZip | Format::Safetensors => {
+            model.load_foreign(config, path, format, &origin)?
         }
     };
     Ok((model, describe(path, &what, &applied, fresh_why)))
@@ -216,6 +112,7 @@ fn describe(path: &Path, what: &str, a: &Applied, fresh_why: &str) -> String {
 mod tests {
     use super::*;
     use crate::model::mask2former::Mask2FormerConfig;
+    use crate::model::maskrcnn::torchvision;
     use crate::util::tensor::to_host;
 
     /// A torchvision ResNet or Mask R-CNN file loads the Mask2Former backbone (the same

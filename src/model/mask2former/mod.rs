@@ -18,6 +18,7 @@
 //! (256-wide, 9 layers, 100 queries, 12544 points, 8 heads, FFN 2048).
 
 pub mod criterion;
+pub mod family;
 pub mod masked_attention;
 pub mod matcher;
 pub mod pixel_decoder;

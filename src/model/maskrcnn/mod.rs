@@ -16,6 +16,8 @@
 
 pub mod anchors;
 pub mod box_coder;
+pub mod export;
+pub mod family;
 pub mod fpn;
 pub mod losses;
 pub mod mask_head;

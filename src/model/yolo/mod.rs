@@ -15,6 +15,8 @@ pub mod assigner;
 pub mod attention;
 pub mod backbone;
 pub mod blocks;
+pub mod export;
+pub mod family;
 pub mod head;
 pub mod loss;
 pub mod neck;

@@ -1,30 +1,41 @@
-//! Training augmentation: the paper's random `crop × crop` window, horizontal flip with
-//! probability `fliplr` and ultralytics' HSV gains drawn uniformly in `1 ± hsv[k]` (hue
-//! rotated, saturation and value scaled, like `augment_hsv`) — plus, each off at 0, what
-//! a top view allows and ultralytics users expect: `copy_paste` ([`super::copy_paste`]),
-//! `mosaic` ([`super::mosaic`]), rotation by up to `degrees`, scale `1 ± scale` and
-//! `translate` as one affine warp ([`super::affine`]), and a vertical flip `flipud`.
+//! Training augmentation, composed as a list ([`Compose`], as ultralytics' `Compose` and
+//! detectron2's `AugmentationList`): each augmentation a type with one `apply`
+//! ([`Augment`]), run in the list's order. [`pipeline`] is the list of an
+//! [`AugmentConfig`]; adding an augmentation is its file and its line there.
 //!
-//! Order, as ultralytics' pipeline: copy-paste → mosaic → affine → crop → HSV → flips.
+//! The list, in ultralytics' order: [`CopyPaste`] ([`super::copy_paste`]) → [`Mosaic`]
+//! ([`super::mosaic`]) → [`RandomAffine`] (rotation by up to `degrees`, scale `1 ± scale`
+//! and `translate` as one warp, [`super::affine`]) → [`Crop`] (the paper's random
+//! `crop × crop` window) → [`FlipLr`] (probability `fliplr`) → [`Hsv`] (ultralytics' HSV
+//! gains drawn uniformly in `1 ± hsv[k]`, like `augment_hsv`) → [`FlipUd`] (`flipud`).
+//! Each off at 0 but crop, the horizontal flip and HSV, which are the paper's.
+//!
 //! Crop, horizontal flip and HSV draw from the caller's item RNG exactly as before the
 //! other augmentations existed; those draw from a second stream ([`augment_full`]'s
 //! `extra`), so a config with them all 0 trains bit for bit as it did. Instances that
 //! leave the crop are dropped; after a warp, mosaic or paste, those under
 //! [`MIN_INSTANCE_PX`] pixels too.
 
-use image::RgbImage;
-use rand::Rng;
+pub mod crop;
+pub mod flip;
+pub mod hsv;
+#[cfg(test)]
+mod reference;
+pub mod step;
 
-use super::affine::{warp, Affine};
-use super::copy_paste::copy_paste;
-use super::dataset::{Instance, Sample};
-use super::mosaic::mosaic;
-use crate::annotations::mask::Mask;
+use std::borrow::Cow;
 
-/// Instances with fewer visible pixels after a warp, mosaic or paste are dropped: a few
-/// pixels of a carcass is not a fair target (ultralytics' `box_candidates` does the same
-/// after `RandomPerspective`).
-pub const MIN_INSTANCE_PX: u64 = 4;
+use rand::{Rng, RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::affine::RandomAffine;
+use super::copy_paste::CopyPaste;
+use super::dataset::Sample;
+use super::mosaic::Mosaic;
+pub use crop::Crop;
+pub use flip::{flip_horizontal, flip_vertical, FlipLr, FlipUd};
+pub use hsv::{hsv_jitter, hsv_to_rgb, rgb_to_hsv, Hsv};
+pub use step::{Augment, AugmentState, PartnerSamples, MIN_INSTANCE_PX};
 
 /// What to apply (the `[train]` keys of the same names; `crop` is `data.crop`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,7 +79,7 @@ impl AugmentConfig {
     }
 
     /// Whether the affine warp can be other than the identity.
-    fn warps(&self) -> bool {
+    pub fn warps(&self) -> bool {
         self.degrees > 0.0 || self.scale > 0.0 || self.translate > 0.0 || self.mosaic > 0.0
     }
 }
@@ -109,16 +120,51 @@ pub fn draw_partners<R: Rng>(
     p
 }
 
-/// The samples [`Partners`] named, loaded.
-#[derive(Default)]
-pub struct PartnerSamples<'a> {
-    pub copy_paste: Option<&'a Sample>,
-    pub mosaic: Option<Vec<&'a Sample>>,
+/// Augmentations run in order on one item ([`Compose::apply`]).
+pub struct Compose(pub Vec<Box<dyn Augment>>);
+
+impl Compose {
+    /// The names of the augmentations, in order.
+    pub fn names(&self) -> Vec<&'static str> {
+        self.0.iter().map(|a| a.name()).collect()
+    }
+
+    /// `s` through every augmentation of the list, in order.
+    pub fn apply(&self, s: &Sample, st: &mut AugmentState) -> Sample {
+        let mut cur = Cow::Borrowed(s);
+        for a in &self.0 {
+            cur = a.apply(cur, st);
+        }
+        cur.into_owned()
+    }
+}
+
+/// The augmentation list of `cfg`: every augmentation in the pipeline's order (one that
+/// is off does nothing and draws nothing, but crop, the horizontal flip and HSV, whose
+/// draws the main stream always had).
+pub fn pipeline(cfg: &AugmentConfig) -> Compose {
+    Compose(vec![
+        Box::new(CopyPaste),
+        Box::new(Mosaic),
+        Box::new(RandomAffine {
+            degrees: cfg.degrees,
+            scale: cfg.scale,
+            translate: cfg.translate,
+            on: cfg.warps(),
+        }),
+        Box::new(Crop {
+            size: cfg.crop,
+            drop_slivers: cfg.extended(),
+        }),
+        Box::new(FlipLr { p: cfg.fliplr }),
+        Box::new(Hsv { gains: cfg.hsv }),
+        Box::new(FlipUd { p: cfg.flipud }),
+    ])
 }
 
 /// The whole pipeline: copy-paste from `partners.copy_paste`, a mosaic with
 /// `partners.mosaic`, the affine warp and the vertical flip draw from `extra`; crop,
-/// horizontal flip and HSV from `rng` through [`augment`].
+/// horizontal flip and HSV from `rng`.
 pub fn augment_full<R: Rng, E: Rng>(
     s: &Sample,
     partners: &PartnerSamples,
@@ -126,172 +172,30 @@ pub fn augment_full<R: Rng, E: Rng>(
     extra: &mut E,
     rng: &mut R,
 ) -> Sample {
-    let pasted;
-    let mut cur = s;
-    if let Some(src) = partners.copy_paste {
-        pasted = copy_paste(cur, src, extra, MIN_INSTANCE_PX);
-        cur = &pasted;
-    }
-    let (w, h) = cur.image.dimensions();
-    let tiled;
-    let mut from = (w, h);
-    if let Some(rest) = &partners.mosaic {
-        let centre = (
-            extra.random_range(w / 2..=w + w / 2),
-            extra.random_range(h / 2..=h + h / 2),
-        );
-        let mut tiles = vec![cur];
-        tiles.extend(rest.iter().copied());
-        tiled = mosaic(&tiles, (w, h), centre, MIN_INSTANCE_PX);
-        cur = &tiled;
-        from = (2 * w, 2 * h);
-    }
-    let warped;
-    if cfg.warps() {
-        let degrees = if cfg.degrees > 0.0 {
-            extra.random_range(-cfg.degrees..=cfg.degrees)
-        } else {
-            0.0
-        };
-        let scale = if cfg.scale > 0.0 {
-            extra.random_range(1.0 - cfg.scale..=1.0 + cfg.scale)
-        } else {
-            1.0
-        };
-        let shift = if cfg.translate > 0.0 {
-            (
-                extra.random_range(-cfg.translate..=cfg.translate) * w as f64,
-                extra.random_range(-cfg.translate..=cfg.translate) * h as f64,
-            )
-        } else {
-            (0.0, 0.0)
-        };
-        let a = Affine::about_centre(from, (w, h), degrees, scale, shift);
-        warped = warp(cur, &a, (w, h), MIN_INSTANCE_PX);
-        cur = &warped;
-    }
-    let mut out = augment(cur, cfg, rng);
-    if cfg.extended() {
-        // The crop cuts too; below the threshold it is a sliver, not a target.
-        out.instances.retain(|i| i.mask.area() >= MIN_INSTANCE_PX);
-    }
-    if cfg.flipud > 0.0 && extra.random::<f64>() < cfg.flipud {
-        flip_vertical(&mut out);
-    }
-    out
-}
-
-/// Mirrors a sample top to bottom, image and masks.
-pub fn flip_vertical(s: &mut Sample) {
-    image::imageops::flip_vertical_in_place(&mut s.image);
-    for inst in &mut s.instances {
-        let w = inst.mask.width as usize;
-        let h = inst.mask.height as usize;
-        for y in 0..h / 2 {
-            let (top, bottom) = inst.mask.data.split_at_mut((h - 1 - y) * w);
-            top[y * w..(y + 1) * w].swap_with_slice(&mut bottom[..w]);
-        }
-    }
-}
-
-/// Crop, flip and colour-jitter one sample.
-pub fn augment<R: Rng>(s: &Sample, cfg: &AugmentConfig, rng: &mut R) -> Sample {
-    let (w, h) = s.image.dimensions();
-    let cw = cfg.crop.min(w);
-    let ch = cfg.crop.min(h);
-    let x0 = rng.random_range(0..=w - cw);
-    let y0 = rng.random_range(0..=h - ch);
-    let flip = rng.random::<f64>() < cfg.fliplr;
-    let gains = [
-        1.0 + cfg.hsv[0] * rng.random_range(-1.0..=1.0),
-        1.0 + cfg.hsv[1] * rng.random_range(-1.0..=1.0),
-        1.0 + cfg.hsv[2] * rng.random_range(-1.0..=1.0),
-    ];
-    let src_x = |x: u32| if flip { x0 + cw - 1 - x } else { x0 + x };
-    let mut image = RgbImage::new(cw, ch);
-    for y in 0..ch {
-        for x in 0..cw {
-            image.put_pixel(x, y, *s.image.get_pixel(src_x(x), y0 + y));
-        }
-    }
-    if cfg.hsv.iter().any(|&g| g > 0.0) {
-        hsv_jitter(&mut image, gains);
-    }
-    let instances = s
-        .instances
-        .iter()
-        .filter_map(|inst| {
-            let mut m = Mask::new(ch, cw);
-            for y in 0..ch {
-                let row = ((y0 + y) * inst.mask.width) as usize;
-                for x in 0..cw {
-                    m.data[(y * cw + x) as usize] = inst.mask.data[row + src_x(x) as usize];
-                }
-            }
-            (m.area() > 0).then_some(Instance {
-                class: inst.class,
-                mask: m,
-            })
-        })
-        .collect();
-    Sample { image, instances }
-}
-
-/// Multiplies hue (as a rotation on the 0..1 circle, like OpenCV's 0..180 LUT), saturation
-/// and value by `gains`, clipping saturation and value to [0, 1].
-pub fn hsv_jitter(img: &mut RgbImage, gains: [f64; 3]) {
-    let [gh, gs, gv] = gains.map(|g| g as f32);
-    for p in img.pixels_mut() {
-        let [r, g, b] = p.0.map(|c| c as f32 / 255.0);
-        let (h, s, v) = rgb_to_hsv(r, g, b);
-        let h = (h * gh).rem_euclid(1.0);
-        let s = (s * gs).clamp(0.0, 1.0);
-        let v = (v * gv).clamp(0.0, 1.0);
-        let (r, g, b) = hsv_to_rgb(h, s, v);
-        p.0 = [r, g, b].map(|c| (c * 255.0).round().clamp(0.0, 255.0) as u8);
-    }
-}
-
-/// RGB in [0, 1] → (hue in [0, 1), saturation, value).
-pub fn rgb_to_hsv(r: f32, g: f32, b: f32) -> (f32, f32, f32) {
-    let max = r.max(g).max(b);
-    let min = r.min(g).min(b);
-    let d = max - min;
-    let h = if d <= 0.0 {
-        0.0
-    } else if max == r {
-        ((g - b) / d).rem_euclid(6.0) / 6.0
-    } else if max == g {
-        ((b - r) / d + 2.0) / 6.0
-    } else {
-        ((r - g) / d + 4.0) / 6.0
+    let mut st = AugmentState {
+        rng: rng as &mut dyn RngCore,
+        extra: extra as &mut dyn RngCore,
+        partners,
+        canvas: None,
     };
-    let s = if max <= 0.0 { 0.0 } else { d / max };
-    (h, s, max)
+    pipeline(cfg).apply(s, &mut st)
 }
 
-pub fn hsv_to_rgb(h: f32, s: f32, v: f32) -> (f32, f32, f32) {
-    let h6 = (h * 6.0).rem_euclid(6.0);
-    let i = h6.floor();
-    let f = h6 - i;
-    let p = v * (1.0 - s);
-    let q = v * (1.0 - s * f);
-    let t = v * (1.0 - s * (1.0 - f));
-    match i as u32 {
-        0 => (v, t, p),
-        1 => (q, v, p),
-        2 => (p, v, t),
-        3 => (p, q, v),
-        4 => (t, p, v),
-        _ => (v, p, q),
-    }
+/// Crop, flip and colour-jitter one sample: the pipeline of a config with nothing else
+/// on, which draws only from `rng` (what the loader runs then, without a second stream).
+pub fn augment<R: Rng>(s: &Sample, cfg: &AugmentConfig, rng: &mut R) -> Sample {
+    // Nothing of the basic list draws from the second stream: a fixed one stands in.
+    let mut unused = ChaCha8Rng::seed_from_u64(0);
+    let basic = AugmentConfig::basic(cfg.crop, cfg.fliplr, cfg.hsv);
+    augment_full(s, &PartnerSamples::default(), &basic, &mut unused, rng)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
-    use rand_chacha::ChaCha8Rng;
+    use crate::annotations::mask::Mask;
+    use crate::data::dataset::Instance;
+    use image::RgbImage;
 
     fn sample() -> Sample {
         let mut image = RgbImage::new(8, 8);
