@@ -105,7 +105,8 @@ pub struct DataConfig {
     pub unlabeled: Option<UnlabeledConfig>,
     /// Shares of carcass-free renders and of renders with distractors
     /// (`[data.negatives]`, see `config::negatives`); the proxy-real set never has them.
-    #[serde(default)]
+    /// Left out of a written config when off, so runs without it keep their bytes.
+    #[serde(default, skip_serializing_if = "Negatives::is_off")]
     pub negatives: Negatives,
 }
 
