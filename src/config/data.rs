@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use super::negatives::Negatives;
 use super::randomize::Randomize;
+use super::self_training::UnlabeledConfig;
 
 /// Where the "real" images come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -97,6 +99,14 @@ pub struct DataConfig {
     /// `config::randomize`.
     #[serde(default = "default_randomize")]
     pub randomize: Randomize,
+    /// `[data.unlabeled]`: photos without labels; setting it turns self-training on
+    /// (`[train.self_training]`, see `config::self_training`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unlabeled: Option<UnlabeledConfig>,
+    /// Shares of carcass-free renders and of renders with distractors
+    /// (`[data.negatives]`, see `config::negatives`); the proxy-real set never has them.
+    #[serde(default)]
+    pub negatives: Negatives,
 }
 
 /// The geometry groups on, the appearance groups opt-in (see `Randomize::TRAINING`).
@@ -140,6 +150,7 @@ impl DataConfig {
         if !(all_test || (ft > 0.0 && fv > 0.0 && ft + fv < 1.0)) {
             bail!("data.split = [{ft}, {fv}] must be two positive fractions (train, val) summing to less than 1, or [0, 0] (every image is test: for `eval --data` on an external set)");
         }
+        d.negatives.validate()?;
         if d.train_limit == Some(0) {
             bail!("data.train_limit = 0 leaves no real train image (leave it out to train on the whole train split)");
         }
@@ -196,6 +207,14 @@ impl DataConfig {
                 if let Some(l) = &d.real.labels {
                     must_exist(l, "data.real.labels")?;
                 }
+            }
+        }
+        if let Some(u) = &d.unlabeled {
+            if !u.images.is_dir() {
+                bail!(
+                    "data.unlabeled.images = {:?} is not a folder (a folder of .jpg/.jpeg/.png photos without labels)",
+                    u.images.display().to_string()
+                );
             }
         }
         Ok(())

@@ -15,7 +15,9 @@ use serde::{Deserialize, Serialize};
 
 mod data;
 mod model;
+mod negatives;
 mod randomize;
+mod self_training;
 mod shipped;
 mod train;
 
@@ -24,7 +26,9 @@ pub use model::{
     Mask2FormerModelConfig, Mask2FormerPreset, MaskRcnnModelConfig, MaskRcnnPreset, ModelConfig,
     ModelKind, YoloModelConfig, YoloScale,
 };
+pub use negatives::Negatives;
 pub use randomize::Randomize;
+pub use self_training::{SelfTrainingConfig, Teacher, UnlabeledConfig};
 pub use shipped::SHIPPED;
 pub use train::{OptimizerKind, Precision, ScheduleKind, TrainConfig};
 
@@ -270,6 +274,14 @@ impl Config {
                     self.data.split
                 );
             }
+        }
+        match (&self.data.unlabeled, &self.train.self_training) {
+            (None, Some(_)) => bail!("[train.self_training] is set but there is no [data.unlabeled] (images = \"DIR\"): self-training needs the unlabeled photos"),
+            (Some(_), st) => st
+                .clone()
+                .unwrap_or_default()
+                .validate(self.train.epochs, self.train.batch)?,
+            (None, None) => {}
         }
         let (kind, max_freeze, stages) = match self.model.kind() {
             ModelKind::Yolo => ("yolo", 23, "ultralytics layer indices; 23 is the head"),

@@ -3,6 +3,8 @@
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
+use super::self_training::SelfTrainingConfig;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum OptimizerKind {
@@ -137,6 +139,11 @@ pub struct TrainConfig {
     /// resolved configs and checkpoint headers, which then read as before this key.
     #[serde(default, skip_serializing_if = "is_f32")]
     pub precision: Precision,
+    /// `[train.self_training]`: the knobs of self-training on `[data.unlabeled]` (which
+    /// turns it on; its defaults apply when this table is left out). Left out of resolved
+    /// configs when unset, which then read as before this key.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub self_training: Option<SelfTrainingConfig>,
 }
 
 fn is_f32(p: &Precision) -> bool {

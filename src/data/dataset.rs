@@ -426,6 +426,7 @@ impl SyntheticSet {
             fresh: data.fresh_synthetic,
             opts: RenderOptions {
                 randomize: data.randomize,
+                negatives: data.negatives,
                 ..render_options(false, data.image_size)
             },
             seed,

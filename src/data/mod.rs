@@ -1,8 +1,9 @@
 //! The training loader, above the renderer: sources (`dataset`: the real set and the
 //! synthetic renders), augmentation (`augment`, with its parts `affine`, `mosaic` and
 //! `copy_paste`), batching (`batch`) into the model-neutral
-//! ground truth [`crate::annotations::targets::Targets`], and the letterbox between image
-//! and network input. The COCO types it reads live in [`crate::annotations`].
+//! ground truth [`crate::annotations::targets::Targets`], the letterbox between image
+//! and network input, and the unlabeled photos of self-training with their pseudo-labels
+//! (`unlabeled`). The COCO types it reads live in [`crate::annotations`].
 
 #[cfg(feature = "train")]
 pub mod affine;
@@ -22,3 +23,5 @@ pub mod mosaic;
 /// models need nothing of the loader; this path stays until `infer/detector.rs` and
 /// `bench/measure.rs` (being reworked for issue 40's family plug-in point) name the new one.
 pub use crate::annotations::targets;
+#[cfg(feature = "train")]
+pub mod unlabeled;

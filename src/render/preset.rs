@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use super::labels::LabelThresholds;
 use super::ranges::DomainRanges;
 use super::skin::PoseRanges;
-use crate::config::Randomize;
+use crate::config::{Negatives, Randomize};
 
 /// Image file format of rendered datasets.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -96,6 +96,10 @@ pub struct RenderOptions {
     /// on (see [`DomainRanges`]); left out of the serialised options while default.
     #[serde(default, skip_serializing_if = "DomainRanges::is_default")]
     pub ranges: DomainRanges,
+    /// Shares of carcass-free renders and renders with distractors (see [`Negatives`]);
+    /// both 0 renders as before and is left out of the serialised options (cache keys).
+    #[serde(default, skip_serializing_if = "Negatives::is_off")]
+    pub negatives: Negatives,
 }
 
 impl RenderOptions {
@@ -140,6 +144,7 @@ impl RenderOptions {
             labels: LabelThresholds::default(),
             randomize: Randomize::default(),
             ranges: DomainRanges::default(),
+            negatives: Negatives::default(),
         }
     }
 
@@ -299,6 +304,7 @@ impl RenderOptions {
             "white_balance_jitter must be in [0, 0.5)"
         );
         self.ranges.validate()?;
+        self.negatives.validate()?;
         Ok(())
     }
 }

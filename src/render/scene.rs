@@ -85,7 +85,12 @@ pub fn sample<R: Rng>(
     if groups.camera {
         view = View::sample(&mut cam_rng, &wide_camera(opts));
     }
-    let empty = groups.scene && scene_rng.random_bool(opts.ranges.p_empty as f64);
+    // The negatives knob: two coin flips from its own stream (a share of 0 never
+    // changes an image).
+    let mut neg_rng = streams.rng(opts, "negatives");
+    let neg_empty = neg_rng.random_bool(opts.negatives.empty as f64);
+    let neg_props = neg_rng.random_bool(opts.negatives.distractors as f64);
+    let empty = (groups.scene && scene_rng.random_bool(opts.ranges.p_empty as f64)) || neg_empty;
     let mut layout = PileLayout::sample(rng, opts, &view, n, density);
     if groups.scene {
         cut_by_frame(&mut scene_rng, opts, &mut layout, &view);
@@ -106,8 +111,10 @@ pub fn sample<R: Rng>(
         .physics
         .then(|| (streams.rng(opts, "physics"), opts.resting_weights));
     let (mut geo, resting, physics_time) = build_pile(asset, &layout, plans, physics);
-    let props = if groups.distractors {
-        add_distractors(streams, opts, &mut geo, &layout, &view)
+    let props = if groups.distractors || neg_props {
+        // The knob's images get at least one object; the group keeps its own range.
+        let at_least = u32::from(!groups.distractors);
+        add_distractors(streams, opts, at_least, &mut geo, &layout, &view)
     } else {
         Vec::new()
     };
@@ -198,17 +205,20 @@ fn cut_by_frame<R: Rng>(rng: &mut R, opts: &RenderOptions, layout: &mut PileLayo
     layout.radius = (layout.radius * rng.random_range(1.0..1.6)).min(view.half_view * 1.4);
 }
 
-/// The `distractors` group: `ranges.distractors` objects on and around the pile.
+/// The `distractors` group (and the negatives knob's distractor images):
+/// `ranges.distractors` objects on and around the pile, raised to at least `at_least`.
 fn add_distractors(
     streams: &Streams,
     opts: &RenderOptions,
+    at_least: u32,
     geo: &mut Geometry,
     layout: &PileLayout,
     view: &View,
 ) -> Vec<super::prop_material::PropMaterial> {
     let mut rng = streams.rng(opts, "distractors");
     let r = opts.ranges.distractors;
-    let count = rng.random_range(r[0]..=r[1].max(r[0])) as usize;
+    let (lo, hi) = (r[0].max(at_least), r[1].max(r[0]).max(at_least));
+    let count = rng.random_range(lo..=hi) as usize;
     let area = distractor::Area {
         pile_centre: layout.centre,
         pile_radius: layout.radius,

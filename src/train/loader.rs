@@ -24,13 +24,16 @@ use crate::config::{Config, TrainConfig};
 use crate::data::augment::{augment, augment_full, draw_partners, AugmentConfig, PartnerSamples};
 use crate::data::batch::{collate, Batch};
 use crate::data::dataset::{RealSet, Sample, SyntheticSet};
+use crate::data::unlabeled::PseudoLabels;
 use crate::util::hash::mix64;
 
-/// One item of an epoch: a real image id or a synthetic index.
+/// One item of an epoch: a real image id, a synthetic index, or the index of a
+/// pseudo-labelled unlabeled image (self-training, `train::self_training`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Item {
     Real(u64),
     Synthetic(u64),
+    Unlabeled(u64),
 }
 
 /// Seed of `b` under `a`: the one derivation of every per-epoch and per-step key.
@@ -70,7 +73,7 @@ impl Mix {
 }
 
 /// An endless stream over `pool`: shuffled, and reshuffled at the start of every pass.
-struct Cycle<'a, T> {
+pub struct Cycle<'a, T> {
     pool: &'a [T],
     order: Vec<usize>,
     next: usize,
@@ -79,7 +82,7 @@ struct Cycle<'a, T> {
 }
 
 impl<'a, T: Copy> Cycle<'a, T> {
-    fn new(pool: &'a [T], seed: u64) -> Self {
+    pub fn new(pool: &'a [T], seed: u64) -> Self {
         Cycle {
             pool,
             order: Vec::new(),
@@ -89,7 +92,7 @@ impl<'a, T: Copy> Cycle<'a, T> {
         }
     }
 
-    fn take(&mut self) -> T {
+    pub fn take(&mut self) -> T {
         if self.next == self.order.len() {
             self.order = (0..self.pool.len()).collect();
             self.order
@@ -165,6 +168,8 @@ pub struct Loader {
     /// Network input size the real images are letterboxed to.
     pub input: u32,
     pub seed: u64,
+    /// Self-training: the current pseudo-labels (`None` before the first labelling).
+    pub pseudo: Option<PseudoLabels>,
 }
 
 impl Loader {
@@ -186,6 +191,7 @@ impl Loader {
             },
             input,
             seed: cfg.seed,
+            pseudo: None,
         }
     }
 
@@ -193,6 +199,10 @@ impl Loader {
         match it {
             Item::Real(id) => self.real.sample(id, self.input),
             Item::Synthetic(i) => self.synthetic.sample(i, epoch as u64),
+            Item::Unlabeled(k) => match &self.pseudo {
+                Some(p) => p.sample(k),
+                None => bail!("the plan has unlabeled image {k} but there are no pseudo-labels"),
+            },
         }
     }
 
@@ -278,6 +288,7 @@ mod tests {
         sorted.sort_by_key(|i| match i {
             Item::Real(id) => (0, *id),
             Item::Synthetic(k) => (1, *k),
+            Item::Unlabeled(k) => (2, *k),
         });
         assert_eq!(
             sorted,
@@ -335,7 +346,7 @@ mod tests {
             .collect();
         syn.sort_by_key(|i| match i {
             Item::Synthetic(k) => *k,
-            Item::Real(_) => u64::MAX,
+            _ => u64::MAX,
         });
         syn.dedup();
         assert_eq!(syn.len(), 60);
