@@ -228,6 +228,28 @@ conv3d_typed!(
 );
 bf16_via_f32!(conv3d_bf16, conv3d_f32, 3, ConvOptions);
 
+/// The tiled im2col + gemm path alone, without the fast-path dispatch of
+/// [`conv2d_f32`]: the reference `conv_engine` is tested and benchmarked
+/// against (chicktrain issue 37).
+pub fn conv2d_im2col_f32(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: &ConvOptions<2>,
+) -> FlexTensor {
+    let (x_3d, weight_3d, options_3d) = expand_2d_to_3d(&x, &weight, options);
+    let out = conv3d_impl::<f32>(
+        x_3d,
+        weight_3d,
+        bias,
+        &options_3d,
+        DType::F32,
+        0.0f32,
+        gemm_f32,
+    );
+    squeeze_3d_to_2d(out)
+}
+
 /// Generic 3D convolution implementation using tiled im2col.
 ///
 /// Tiled approach processes output in TILE_SIZE chunks:

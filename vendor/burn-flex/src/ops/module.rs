@@ -2,7 +2,7 @@
 //!
 //! These operations power neural network modules like convolutions and pooling.
 
-use crate::ops::{conv, conv_transpose, deform_conv, interpolate, pool};
+use crate::ops::{conv, conv_engine, conv_transpose, deform_conv, interpolate, pool};
 use crate::{Flex, FlexTensor, Layout};
 use burn_backend::{
     DType, Element, TensorMetadata,
@@ -13,7 +13,7 @@ use burn_backend::{
     },
     tensor::{BoolTensor, FloatTensor, IntTensor},
 };
-use burn_std::{Bytes, IntDType, Shape};
+use burn_std::{Bytes, IntDType, Shape, Slice};
 use bytemuck::Pod;
 
 /// Cast a tensor from half-precision type E to f32.
@@ -67,12 +67,69 @@ impl ModuleOps<Flex> for Flex {
     ) -> FloatTensor<Flex> {
         let (x, options) = pad_asymmetric_conv_input::<Flex, 2>(x, options);
         match x.dtype() {
-            DType::F32 => conv::conv2d_f32(x, weight, bias, &options),
+            DType::F32 => {
+                let geometry = conv_engine::Geometry::new(
+                    x.layout().shape(),
+                    weight.layout().shape(),
+                    &options,
+                );
+                match geometry {
+                    Some(g) if conv_engine::prefers_forward(&g) => {
+                        conv_engine::conv2d(x, weight, bias, &options)
+                            .expect("conv_engine takes every shape Geometry accepts")
+                    }
+                    _ => conv::conv2d_f32(x, weight, bias, &options),
+                }
+            }
             DType::F64 => conv::conv2d_f64(x, weight, bias, &options),
             DType::F16 => conv::conv2d_f16(x, weight, bias, &options),
             DType::BF16 => conv::conv2d_bf16(x, weight, bias, &options),
             dtype => panic!("conv2d: unsupported dtype {:?}", dtype),
         }
+    }
+
+    /// Through `conv_engine` (chicktrain issue 37) instead of Burn's default
+    /// transposed convolution; asymmetric padding is made explicit first.
+    fn conv2d_x_backward(
+        x: FloatTensor<Flex>,
+        weight: FloatTensor<Flex>,
+        output_grad: FloatTensor<Flex>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Flex> {
+        let x_shape = x.layout().shape().clone();
+        let (padded, sym) = pad_asymmetric_conv_input::<Flex, 2>(x, options.clone());
+        let dtype = output_grad.dtype();
+        let padded_shape = padded.layout().shape().clone();
+        // The engine declines only shapes the forward pass already rejected and
+        // empty batches/outputs, whose gradient is zero.
+        let grad = conv_engine::conv2d_x_backward(&padded_shape, weight, output_grad, &sym)
+            .unwrap_or_else(|| FlexTensor::zeros(padded_shape, dtype));
+        if !options.is_asymmetric() {
+            return grad;
+        }
+        let ranges = [
+            Slice::from(0..x_shape[0]),
+            Slice::from(0..x_shape[1]),
+            Slice::from(options.padding[0].0..options.padding[0].0 + x_shape[2]),
+            Slice::from(options.padding[1].0..options.padding[1].0 + x_shape[3]),
+        ];
+        crate::ops::slice::slice(grad, &ranges)
+    }
+
+    /// Through `conv_engine` (chicktrain issue 37) instead of Burn's default
+    /// convolution of the batch-swapped tensors.
+    fn conv2d_weight_backward(
+        x: FloatTensor<Flex>,
+        weight: FloatTensor<Flex>,
+        output_grad: FloatTensor<Flex>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Flex> {
+        let (padded, sym) = pad_asymmetric_conv_input::<Flex, 2>(x, options);
+        let w_shape = weight.layout().shape().clone();
+        let dtype = weight.dtype();
+        // Declined shapes: see `conv2d_x_backward`.
+        conv_engine::conv2d_weight_backward(padded, &w_shape, output_grad, &sym)
+            .unwrap_or_else(|| FlexTensor::zeros(w_shape, dtype))
     }
 
     fn deform_conv2d(

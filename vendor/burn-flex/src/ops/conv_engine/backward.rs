@@ -1,0 +1,215 @@
+//! Backward pass: input gradient as `col2im(W_g^T · dY_tile)`, weight gradient
+//! as `Σ dY_tile · panel^T`, both GEMMs reading the NCHW tensors and the weight
+//! through strides (no transposed copies).
+//!
+//! Summation order is fixed by the shape alone (never by thread scheduling):
+//! the weight gradient splits its (image, tile) list into a fixed number of
+//! chunks with tiles cut as for one thread, and adds the chunk sums in order.
+
+use alloc::vec;
+use alloc::vec::Vec;
+
+use super::geometry::Geometry;
+use super::panel::{col2im_rows, im2col_rows};
+use super::{Elem, Shared, for_each_task, threads};
+use crate::FlexTensor;
+
+/// Partial sums of the weight gradient computed independently, then added in order.
+const WEIGHT_GRAD_CHUNKS: usize = 8;
+
+/// Input gradient `[batch, c_in, h, w]` as a flat vector.
+pub(super) fn x_grad<T: Elem>(g: &Geometry, weight: FlexTensor, dy: FlexTensor) -> Vec<T> {
+    let weight = weight.to_contiguous();
+    let dy = dy.to_contiguous();
+    let ws: &[T] = weight.storage();
+    let dys: &[T] = dy.storage();
+    let mut dx = vec![T::ZERO; g.batch * g.c_in * g.in_plane()];
+    let dst = Shared(dx.as_mut_ptr());
+    if g.is_pointwise() {
+        // Each tile's gradient is a disjoint block of dX: split by tiles.
+        let tiles = g.tiles(threads());
+        for_each_task(g.batch * tiles.len(), |t, _: &mut Vec<T>| {
+            let (r0, r1) = tiles[t % tiles.len()];
+            for grp in 0..g.groups {
+                // SAFETY: disjoint (image, rows, group) blocks of `dx`.
+                unsafe { pointwise_x_tile(g, ws, dys, dst, t / tiles.len(), grp, r0, r1) };
+            }
+        });
+        return dx;
+    }
+    // col2im of neighbouring tiles overlaps in input rows: a task owns a whole
+    // (image, group) gradient plane set and walks its tiles in order.
+    let tasks = g.batch * g.groups;
+    let inner = if tasks < threads() && g.k() * g.mpg * g.out_plane() >= 1 << 21 {
+        gemm::Parallelism::Rayon(0)
+    } else {
+        gemm::Parallelism::None
+    };
+    let tiles = g.tiles(1);
+    for_each_task(tasks, |t, panel: &mut Vec<T>| {
+        let (b, grp) = (t / g.groups, t % g.groups);
+        let off = (b * g.c_in + grp * g.cpg) * g.in_plane();
+        // SAFETY: task `t` alone writes this (image, group) block of `dx`.
+        let dx_group =
+            unsafe { core::slice::from_raw_parts_mut(dst.at(off), g.cpg * g.in_plane()) };
+        for &(r0, r1) in &tiles {
+            let n = (r1 - r0) * g.ow;
+            panel.resize(g.k() * n, T::ZERO);
+            let dy_off = (b * g.c_out + grp * g.mpg) * g.out_plane() + r0 * g.ow;
+            // panel[k, n] = W_g^T[k, mpg] · dY[mpg, n]; W_g is [mpg, k] row-major.
+            unsafe {
+                gemm::gemm(
+                    g.k(),
+                    n,
+                    g.mpg,
+                    panel.as_mut_ptr(),
+                    1,
+                    n as isize,
+                    false,
+                    ws[grp * g.mpg * g.k()..].as_ptr(),
+                    g.k() as isize,
+                    1,
+                    dys[dy_off..].as_ptr(),
+                    1,
+                    g.out_plane() as isize,
+                    T::ZERO,
+                    T::ONE,
+                    false,
+                    false,
+                    false,
+                    inner,
+                );
+            }
+            col2im_rows(g, &panel[..g.k() * n], r0, r1, dx_group);
+        }
+    });
+    dx
+}
+
+/// dX rows `r0..r1` of one image and group of a 1×1 stride-1 convolution:
+/// `dX[cpg, n] = W_g^T[cpg, mpg] · dY[mpg, n]`, written in place.
+///
+/// # Safety
+/// `dst` points at the `[batch, c_in, h, w]` gradient and no other thread
+/// writes this block concurrently.
+#[allow(clippy::too_many_arguments)]
+unsafe fn pointwise_x_tile<T: Elem>(
+    g: &Geometry,
+    ws: &[T],
+    dys: &[T],
+    dst: Shared<T>,
+    b: usize,
+    grp: usize,
+    r0: usize,
+    r1: usize,
+) {
+    let n = (r1 - r0) * g.ow;
+    let dx_off = (b * g.c_in + grp * g.cpg) * g.in_plane() + r0 * g.ow;
+    let dy_off = (b * g.c_out + grp * g.mpg) * g.out_plane() + r0 * g.ow;
+    unsafe {
+        gemm::gemm(
+            g.cpg,
+            n,
+            g.mpg,
+            dst.at(dx_off),
+            1,
+            g.in_plane() as isize,
+            false,
+            ws[grp * g.mpg * g.cpg..].as_ptr(),
+            g.cpg as isize,
+            1,
+            dys[dy_off..].as_ptr(),
+            1,
+            g.out_plane() as isize,
+            T::ZERO,
+            T::ONE,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        );
+    }
+}
+
+/// Weight gradient `[c_out, cpg, kh, kw]` as a flat vector.
+pub(super) fn weight_grad<T: Elem>(g: &Geometry, x: FlexTensor, dy: FlexTensor) -> Vec<T> {
+    let x = x.to_contiguous();
+    let dy = dy.to_contiguous();
+    let xs: &[T] = x.storage();
+    let dys: &[T] = dy.storage();
+    let len = g.c_out * g.k();
+    let tiles = g.tiles(1);
+    let tasks = g.batch * tiles.len();
+    let chunks = WEIGHT_GRAD_CHUNKS.min(tasks);
+    let mut partials = vec![T::ZERO; chunks * len];
+    let dst = Shared(partials.as_mut_ptr());
+    for_each_task(chunks, |c, panel: &mut Vec<T>| {
+        // SAFETY: chunk `c` alone writes its `len` partial sums.
+        let acc = unsafe { core::slice::from_raw_parts_mut(dst.at(c * len), len) };
+        for t in c * tasks / chunks..(c + 1) * tasks / chunks {
+            let (r0, r1) = tiles[t % tiles.len()];
+            for grp in 0..g.groups {
+                weight_tile(g, xs, dys, t / tiles.len(), grp, r0, r1, acc, panel);
+            }
+        }
+    });
+    let (first, rest) = partials.split_at_mut(len);
+    for part in rest.chunks_exact(len) {
+        for (a, &p) in first.iter_mut().zip(part) {
+            *a = *a + p;
+        }
+    }
+    partials.truncate(len);
+    partials
+}
+
+/// `acc_g[mpg, k] += dY[mpg, n] · panel^T[n, k]` for one (image, group, rows).
+#[allow(clippy::too_many_arguments)]
+fn weight_tile<T: Elem>(
+    g: &Geometry,
+    xs: &[T],
+    dys: &[T],
+    b: usize,
+    grp: usize,
+    r0: usize,
+    r1: usize,
+    acc: &mut [T],
+    panel: &mut Vec<T>,
+) {
+    let (k, n) = (g.k(), (r1 - r0) * g.ow);
+    let x_group = &xs[(b * g.c_in + grp * g.cpg) * g.in_plane()..][..g.cpg * g.in_plane()];
+    // panel^T[t, kk] is panel[kk * n + t]; for 1×1 stride 1 it is x[kk, t].
+    let (rhs, rhs_cs) = if g.is_pointwise() {
+        (x_group[r0 * g.ow..].as_ptr(), g.in_plane())
+    } else {
+        panel.resize(k * n, T::ZERO);
+        im2col_rows(g, x_group, r0, r1, &mut panel[..k * n]);
+        (panel.as_ptr(), n)
+    };
+    let acc_g = &mut acc[grp * g.mpg * k..(grp + 1) * g.mpg * k];
+    let dy_off = (b * g.c_out + grp * g.mpg) * g.out_plane() + r0 * g.ow;
+    // SAFETY: all pointers are in bounds of their slices for the given strides.
+    unsafe {
+        gemm::gemm(
+            g.mpg,
+            k,
+            n,
+            acc_g.as_mut_ptr(),
+            1,
+            k as isize,
+            true,
+            dys[dy_off..].as_ptr(),
+            1,
+            g.out_plane() as isize,
+            rhs,
+            rhs_cs as isize,
+            1,
+            T::ONE,
+            T::ONE,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        );
+    }
+}

@@ -1,0 +1,176 @@
+//! Side-by-side timing of the engine and the paths it replaces on 27 distinct
+//! convolution shapes of YOLO11n-seg (ultralytics `yolo11-seg.yaml`, scale n, one
+//! class), forward and both gradients, batch 1. The list is not every shape of
+//! the model and its counts are approximate, so the TOTAL rows are indicative
+//! only; the per-shape ratios are the measurement. Ignored by default (it takes
+//! minutes); run with
+//! `cargo test --release --lib conv_engine::bench -- --ignored --nocapture`.
+//! Old and new calls alternate (old, new, old, new, …) so both see the same
+//! machine load; the median of 10 repeats is reported, as GFLOP/s and the
+//! ratio old ÷ new.
+
+extern crate std;
+
+use alloc::vec::Vec;
+use burn_backend::ops::ConvOptions;
+use burn_backend::{DType, TensorData};
+use std::println;
+use std::time::Instant;
+
+use super::{Geometry, prefers_forward, reference};
+use crate::FlexTensor;
+use crate::ops::conv::conv2d_f32;
+
+const REPEATS: usize = 10;
+
+/// Distinct YOLO11n-seg convolutions: (c_in, c_out, k, stride, groups, input level, count).
+const SHAPES: [(usize, usize, usize, usize, usize, u32, usize); 27] = [
+    (3, 16, 3, 2, 1, 0, 1),
+    (16, 32, 3, 2, 1, 1, 1),
+    (32, 32, 1, 1, 1, 2, 1),
+    (16, 16, 3, 1, 1, 2, 2),
+    (48, 64, 1, 1, 1, 2, 1),
+    (64, 64, 3, 2, 1, 2, 1),
+    (64, 64, 3, 1, 1, 2, 1),
+    (64, 32, 1, 1, 1, 2, 1),
+    (64, 64, 1, 1, 1, 3, 3),
+    (32, 32, 3, 1, 1, 3, 4),
+    (96, 128, 1, 1, 1, 3, 1),
+    (128, 128, 3, 2, 1, 3, 1),
+    (64, 64, 3, 1, 1, 3, 3),
+    (64, 64, 3, 1, 64, 3, 2),
+    (64, 32, 3, 1, 1, 3, 1),
+    (128, 128, 1, 1, 1, 4, 1),
+    (32, 32, 3, 1, 1, 4, 4),
+    (192, 128, 1, 1, 1, 4, 3),
+    (128, 256, 3, 2, 1, 4, 1),
+    (64, 64, 3, 1, 1, 4, 5),
+    (384, 128, 1, 1, 1, 4, 1),
+    (128, 128, 3, 1, 128, 4, 1),
+    (256, 256, 1, 1, 1, 5, 3),
+    (64, 64, 3, 1, 1, 5, 9),
+    (384, 256, 1, 1, 1, 5, 3),
+    (128, 256, 1, 1, 1, 5, 2),
+    (256, 256, 3, 1, 256, 5, 1),
+];
+
+fn tensor(shape: [usize; 4], seed: &mut u64) -> FlexTensor {
+    let n: usize = shape.iter().product();
+    let data: Vec<f32> = (0..n)
+        .map(|_| {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((*seed >> 40) as f32 / (1u64 << 24) as f32) - 0.5
+        })
+        .collect();
+    FlexTensor::from_data(TensorData::new(data, shape))
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn interleaved(old: &dyn Fn(), new: &dyn Fn()) -> (f64, f64) {
+    old();
+    new();
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..REPEATS {
+        let t = Instant::now();
+        old();
+        a.push(t.elapsed().as_secs_f64() * 1e3);
+        let t = Instant::now();
+        new();
+        b.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    (median(a), median(b))
+}
+
+#[test]
+#[ignore = "benchmark: minutes; run with --ignored --nocapture"]
+fn bench_yolo11n_seg_shapes() {
+    println!(
+        "| size | shape | ×n | pass | old ms | engine ms | old GFLOP/s | engine GFLOP/s | ratio | fwd→engine |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for size in [256usize, 640] {
+        let mut totals = [(0.0f64, 0.0f64); 3];
+        for &(c_in, c_out, k, s, groups, level, count) in &SHAPES {
+            let hw = size >> level;
+            let opts = ConvOptions::new([s; 2], [k / 2; 2], [1, 1], groups);
+            let x_shape = [1, c_in, hw, hw];
+            let w_shape = [c_out, c_in / groups, k, k];
+            let g = Geometry::new(&x_shape, &w_shape, &opts).unwrap();
+            let mut seed = 37;
+            let x = tensor(x_shape, &mut seed);
+            let w = tensor(w_shape, &mut seed);
+            let dy = tensor([1, c_out, g.oh, g.ow], &mut seed);
+            assert_eq!(x.dtype(), DType::F32);
+            let gflop = 2.0 * (c_out * g.oh * g.ow * (c_in / groups) * k * k) as f64 / 1e9;
+            let fwd = prefers_forward(&g);
+            let timings = [
+                interleaved(
+                    &|| drop(conv2d_f32(x.clone(), w.clone(), None, &opts)),
+                    &|| drop(super::conv2d(x.clone(), w.clone(), None, &opts)),
+                ),
+                interleaved(
+                    &|| {
+                        drop(reference::x_backward_f32(
+                            &x_shape,
+                            w.clone(),
+                            dy.clone(),
+                            &opts,
+                        ))
+                    },
+                    &|| {
+                        drop(super::conv2d_x_backward(
+                            &x_shape,
+                            w.clone(),
+                            dy.clone(),
+                            &opts,
+                        ))
+                    },
+                ),
+                interleaved(
+                    &|| {
+                        drop(reference::weight_backward_f32(
+                            x.clone(),
+                            &w_shape,
+                            dy.clone(),
+                            &opts,
+                        ))
+                    },
+                    &|| {
+                        drop(super::conv2d_weight_backward(
+                            x.clone(),
+                            &w_shape,
+                            dy.clone(),
+                            &opts,
+                        ))
+                    },
+                ),
+            ];
+            for (p, (old, new)) in timings.into_iter().enumerate() {
+                let pass = ["forward", "x grad", "weight grad"][p];
+                // What conv2d actually runs: the old forward where dispatch keeps it.
+                let used = if p == 0 && !fwd { old } else { new };
+                totals[p].0 += count as f64 * old;
+                totals[p].1 += count as f64 * used;
+                println!(
+                    "| {size} | {c_in}→{c_out} {k}×{k} s{s} g{groups} @{hw} | {count} | {pass} | {old:.3} | {new:.3} | {:.1} | {:.1} | {:.2} | {fwd} |",
+                    gflop / old * 1e3,
+                    gflop / new * 1e3,
+                    old / new
+                );
+            }
+        }
+        for (p, (old, used)) in totals.iter().enumerate() {
+            let pass = ["forward", "x grad", "weight grad"][p];
+            println!(
+                "| {size} | TOTAL (each shape × its count, with dispatch) | | {pass} | {old:.2} | {used:.2} | | | {:.2} | |",
+                old / used
+            );
+        }
+    }
+}

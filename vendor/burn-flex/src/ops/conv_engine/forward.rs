@@ -1,0 +1,100 @@
+//! Forward pass: per (image, tile of output rows, group), one GEMM
+//! `out[mpg, n] (+)= W_g[mpg, k] · panel[k, n]` written straight into the NCHW
+//! output, with the bias as the GEMM's initial accumulator.
+
+use alloc::vec;
+use alloc::vec::Vec;
+
+use super::geometry::Geometry;
+use super::panel::im2col_rows;
+use super::{Elem, Shared, for_each_task, threads};
+use crate::FlexTensor;
+
+/// Output `[batch, c_out, oh, ow]` as a flat vector.
+pub(super) fn conv2d<T: Elem>(
+    g: &Geometry,
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+) -> Vec<T> {
+    let x = x.to_contiguous();
+    let weight = weight.to_contiguous();
+    let xs: &[T] = x.storage();
+    let ws: &[T] = weight.storage();
+    let plane = g.out_plane();
+    let mut out = vec![T::ZERO; g.batch * g.c_out * plane];
+    let with_bias = bias.is_some();
+    if let Some(bias) = bias {
+        let bias = bias.to_contiguous();
+        let bs: &[T] = bias.storage();
+        for (i, chunk) in out.chunks_exact_mut(plane).enumerate() {
+            chunk.fill(bs[i % g.c_out]);
+        }
+    }
+    let tiles = g.tiles(threads());
+    let dst = Shared(out.as_mut_ptr());
+    for_each_task(g.batch * tiles.len(), |t, panel: &mut Vec<T>| {
+        let (r0, r1) = tiles[t % tiles.len()];
+        let b = t / tiles.len();
+        for grp in 0..g.groups {
+            // SAFETY: tasks write disjoint (image, row-range) blocks of `out`,
+            // which outlives `for_each_task`.
+            unsafe { tile(g, xs, ws, dst, b, grp, r0, r1, with_bias, panel) };
+        }
+    });
+    out
+}
+
+/// One (image, group, row range) GEMM.
+///
+/// # Safety
+/// `dst` points at the `[batch, c_out, oh, ow]` output, and no other thread
+/// writes rows `r0..r1` of image `b`, group `grp` concurrently.
+#[allow(clippy::too_many_arguments)]
+unsafe fn tile<T: Elem>(
+    g: &Geometry,
+    xs: &[T],
+    ws: &[T],
+    dst: Shared<T>,
+    b: usize,
+    grp: usize,
+    r0: usize,
+    r1: usize,
+    accumulate: bool,
+    panel: &mut Vec<T>,
+) {
+    let k = g.k();
+    let n = (r1 - r0) * g.ow;
+    let x_group = &xs[(b * g.c_in + grp * g.cpg) * g.in_plane()..][..g.cpg * g.in_plane()];
+    let (rhs, rhs_rs) = if g.is_pointwise() {
+        (x_group[r0 * g.ow..].as_ptr(), g.in_plane())
+    } else {
+        panel.resize(k * n, T::ZERO);
+        im2col_rows(g, x_group, r0, r1, &mut panel[..k * n]);
+        (panel.as_ptr(), n)
+    };
+    let out_off = (b * g.c_out + grp * g.mpg) * g.out_plane() + r0 * g.ow;
+    unsafe {
+        gemm::gemm(
+            g.mpg,
+            n,
+            k,
+            dst.at(out_off),
+            1,
+            g.out_plane() as isize,
+            accumulate,
+            ws[grp * g.mpg * k..].as_ptr(),
+            1,
+            k as isize,
+            rhs,
+            1,
+            rhs_rs as isize,
+            T::ONE,
+            T::ONE,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        );
+    }
+}

@@ -1,0 +1,239 @@
+//! The engine against the paths it replaces, on seeded random shapes: the
+//! forward against the tiled im2col path (`conv::conv2d_im2col_f32`), the
+//! input gradient against Burn's default (a transposed convolution), the
+//! weight gradient against Burn's default (a convolution of the batch-swapped
+//! tensors, one per group), and all three against a direct f64 loop.
+//! Tolerance: max |engine − reference| ≤ 1e-4 · max |reference| per tensor.
+
+use alloc::vec;
+use alloc::vec::Vec;
+use burn_backend::DType;
+use burn_backend::ops::ConvOptions;
+use burn_std::{Bytes, Shape};
+
+use super::{Geometry, reference};
+use crate::ops::conv;
+use crate::{FlexTensor, Layout};
+
+/// One convolution: `[b, c_in, h, w]`, `c_out`, `[kh, kw]`, stride, padding, dilation, groups.
+#[derive(Clone, Copy, Debug)]
+struct Case {
+    x: [usize; 4],
+    c_out: usize,
+    k: [usize; 2],
+    stride: [usize; 2],
+    pad: [usize; 2],
+    dil: [usize; 2],
+    groups: usize,
+}
+
+struct Lcg(u64);
+
+impl Lcg {
+    fn next(&mut self) -> u64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        self.0 >> 33
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+    fn vec(&mut self, len: usize) -> Vec<f32> {
+        (0..len)
+            .map(|_| self.below(20001) as f32 / 10000.0 - 1.0)
+            .collect()
+    }
+}
+
+fn t4(data: Vec<f32>, s: [usize; 4]) -> FlexTensor {
+    let shape = Shape::from(vec![s[0], s[1], s[2], s[3]]);
+    FlexTensor::new(
+        Bytes::from_elems(data),
+        Layout::contiguous(shape),
+        DType::F32,
+    )
+}
+
+fn values(t: &FlexTensor) -> Vec<f32> {
+    t.to_contiguous().storage::<f32>().to_vec()
+}
+
+fn assert_close(what: &str, case: &Case, got: &[f32], want: &[f32]) {
+    assert_eq!(got.len(), want.len(), "{what} length, {case:?}");
+    let scale = want.iter().fold(0f32, |m, v| m.max(v.abs())).max(1e-6);
+    let err = got
+        .iter()
+        .zip(want)
+        .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+    assert!(
+        err <= 1e-4 * scale,
+        "{what}: max error {err} vs max |ref| {scale}, {case:?}"
+    );
+}
+
+/// Direct f64 loops: output, input gradient and weight gradient of `case` for
+/// input `x`, weight `w` and output gradient `dy`.
+fn naive(case: &Case, g: &Geometry, x: &[f32], w: &[f32], dy: &[f32]) -> [Vec<f32>; 3] {
+    let mut y = vec![0f64; g.batch * g.c_out * g.out_plane()];
+    let mut dx = vec![0f64; x.len()];
+    let mut dw = vec![0f64; w.len()];
+    for b in 0..g.batch {
+        for co in 0..g.c_out {
+            let grp = co / g.mpg;
+            for c in 0..g.cpg {
+                let ci = grp * g.cpg + c;
+                for i in 0..g.kh {
+                    for j in 0..g.kw {
+                        let wi = ((co * g.cpg + c) * g.kh + i) * g.kw + j;
+                        for r in 0..g.oh {
+                            // Written out rather than `Geometry::input_row`, so a bug
+                            // there cannot hide in the reference.
+                            let ih = (r * g.sh + i * g.dh).wrapping_sub(g.ph);
+                            if ih >= g.h {
+                                continue;
+                            }
+                            for o in 0..g.ow {
+                                let iw = (o * g.sw + j * g.dw).wrapping_sub(g.pw);
+                                if iw >= g.w {
+                                    continue;
+                                }
+                                let xi = ((b * g.c_in + ci) * g.h + ih) * g.w + iw;
+                                let yi = ((b * g.c_out + co) * g.oh + r) * g.ow + o;
+                                y[yi] += x[xi] as f64 * w[wi] as f64;
+                                dx[xi] += dy[yi] as f64 * w[wi] as f64;
+                                dw[wi] += dy[yi] as f64 * x[xi] as f64;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let _ = case;
+    [y, dx, dw].map(|v| v.into_iter().map(|e| e as f32).collect())
+}
+
+fn check(case: Case, seed: u64) {
+    let mut rng = Lcg(seed);
+    let opts = ConvOptions::new(case.stride, case.pad, case.dil, case.groups);
+    let w_shape = [case.c_out, case.x[1] / case.groups, case.k[0], case.k[1]];
+    let g = Geometry::new(&case.x, &w_shape, &opts).expect("test case is a valid convolution");
+    let x = rng.vec(case.x.iter().product());
+    let w = rng.vec(w_shape.iter().product());
+    let bias = rng.vec(case.c_out);
+    let dy = rng.vec(g.batch * g.c_out * g.out_plane());
+    let y_shape = [g.batch, g.c_out, g.oh, g.ow];
+    let [y_ref, dx_ref, dw_ref] = naive(&case, &g, &x, &w, &dy);
+    let (xt, wt, dyt) = (t4(x, case.x), t4(w, w_shape), t4(dy, y_shape));
+    let bt = FlexTensor::new(
+        Bytes::from_elems(bias.clone()),
+        Layout::contiguous(Shape::from(vec![case.c_out])),
+        DType::F32,
+    );
+
+    let y = super::conv2d(xt.clone(), wt.clone(), Some(bt.clone()), &opts).unwrap();
+    let old = conv::conv2d_im2col_f32(xt.clone(), wt.clone(), Some(bt), &opts);
+    let y_ref: Vec<f32> = y_ref
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v + bias[(i / g.out_plane()) % g.c_out])
+        .collect();
+    assert_close("forward vs naive", &case, &values(&y), &y_ref);
+    assert_close("forward vs im2col", &case, &values(&y), &values(&old));
+
+    let dx = super::conv2d_x_backward(&case.x, wt.clone(), dyt.clone(), &opts).unwrap();
+    let dx_old = reference::x_backward_f32(&case.x, wt, dyt.clone(), &opts);
+    assert_close("x grad vs naive", &case, &values(&dx), &dx_ref);
+    assert_close("x grad vs default", &case, &values(&dx), &values(&dx_old));
+
+    let dw = super::conv2d_weight_backward(xt.clone(), &w_shape, dyt.clone(), &opts).unwrap();
+    assert_close("weight grad vs naive", &case, &values(&dw), &dw_ref);
+    assert_close(
+        "weight grad vs default",
+        &case,
+        &values(&dw),
+        &values(&reference::weight_backward_f32(
+            xt.clone(),
+            &w_shape,
+            dyt.clone(),
+            &opts,
+        )),
+    );
+}
+
+fn case(
+    x: [usize; 4],
+    c_out: usize,
+    k: usize,
+    stride: usize,
+    pad: usize,
+    dil: usize,
+    groups: usize,
+) -> Case {
+    Case {
+        x,
+        c_out,
+        k: [k, k],
+        stride: [stride; 2],
+        pad: [pad; 2],
+        dil: [dil; 2],
+        groups,
+    }
+}
+
+#[test]
+fn engine_matches_reference_on_listed_shapes() {
+    let cases = [
+        case([1, 8, 9, 11], 16, 1, 1, 0, 1, 1), // 1×1 stride 1: pointwise GEMM
+        case([8, 6, 7, 5], 4, 1, 1, 0, 1, 2),   // 1×1 grouped, batch 8
+        case([1, 5, 13, 9], 7, 3, 1, 1, 1, 1),  // 3×3 same padding, odd sizes
+        case([8, 4, 8, 8], 8, 3, 2, 1, 1, 1),   // 3×3 stride 2, batch 8
+        case([1, 6, 10, 12], 6, 3, 1, 1, 1, 6), // depthwise
+        case([2, 8, 9, 9], 4, 3, 1, 2, 2, 2),   // dilation 2, padding 2, groups 2
+        case([1, 3, 11, 11], 5, 5, 2, 2, 1, 1), // 5×5 stride 2
+        case([1, 4, 6, 6], 3, 3, 1, 0, 1, 1),   // no padding
+        case([1, 6, 5, 7], 4, 1, 2, 0, 1, 1),   // 1×1 stride 2 (not pointwise)
+        case([1, 2, 1, 9], 3, 3, 1, 1, 1, 1),   // one input row
+        case([1, 8, 60, 20], 8, 3, 1, 1, 1, 1), // several rows per tile
+    ];
+    for (i, c) in cases.into_iter().enumerate() {
+        check(c, 1000 + i as u64);
+    }
+}
+
+#[test]
+fn engine_matches_reference_on_random_shapes() {
+    let mut rng = Lcg(37);
+    for i in 0..40 {
+        let groups = [1, 1, 2, 3][rng.below(4)];
+        let depthwise = rng.below(5) == 0;
+        let cpg = 1 + rng.below(5);
+        let c_in = if depthwise { groups * 2 } else { groups * cpg };
+        let c_out = if depthwise {
+            c_in
+        } else {
+            groups * (1 + rng.below(5))
+        };
+        let groups = if depthwise { c_in } else { groups };
+        let k = [1, 3, 3, 5][rng.below(4)];
+        let (stride, pad, dil) = (1 + rng.below(2), rng.below(3), 1 + rng.below(2));
+        let batch = [1, 8][rng.below(2)];
+        let (h, w) = (k + dil * 2 + rng.below(8), k + dil * 2 + rng.below(8));
+        check(
+            case([batch, c_in, h, w], c_out, k, stride, pad, dil, groups),
+            5000 + i,
+        );
+    }
+}
+
+#[test]
+fn geometry_rejects_asymmetric_padding_and_bad_channels() {
+    let asym = ConvOptions::new_with_padding([1, 1], [(0, 1), (1, 1)], [1, 1], 1);
+    assert!(Geometry::new(&[1, 2, 5, 5], &[2, 2, 3, 3], &asym).is_none());
+    let opts = ConvOptions::new([1, 1], [0, 0], [1, 1], 2);
+    assert!(Geometry::new(&[1, 3, 5, 5], &[2, 1, 3, 3], &opts).is_none());
+    let big = ConvOptions::new([1, 1], [0, 0], [1, 1], 1);
+    assert!(Geometry::new(&[1, 1, 2, 2], &[1, 1, 3, 3], &big).is_none());
+}
