@@ -29,7 +29,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::data::ellipses::ellipse_batch;
-use crate::data::targets::Targets;
+use crate::annotations::targets::Targets;
 use crate::infer::detector::ConfigVisitor;
 use crate::model::family::{Family, TrainingLoss};
 use crate::model::summary::ModelSummary;

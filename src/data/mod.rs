@@ -19,9 +19,5 @@ pub mod ellipses;
 pub mod letterbox;
 #[cfg(feature = "train")]
 pub mod mosaic;
-/// The ground truth moved to the foundation ([`crate::annotations::targets`]) so that the
-/// models need nothing of the loader; this path stays until `infer/detector.rs` and
-/// `bench/measure.rs` (being reworked for issue 40's family plug-in point) name the new one.
-pub use crate::annotations::targets;
 #[cfg(feature = "train")]
 pub mod unlabeled;

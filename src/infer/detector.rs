@@ -19,7 +19,7 @@ use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use crate::config::{Config, ModelConfig, ModelKind};
-use crate::data::targets::Targets;
+use crate::annotations::targets::Targets;
 use crate::model::detection::Detection;
 pub use crate::model::family::StepLoss;
 use crate::model::family::{

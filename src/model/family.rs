@@ -27,7 +27,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 
-use crate::data::targets::Targets;
+use crate::annotations::targets::Targets;
 use crate::model::detection::{nms_detections, Detection};
 use crate::model::summary::ModelSummary;
 use crate::model::weights::{Applied, Format};

@@ -10,7 +10,7 @@ use burn::tensor::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 
 use crate::config::MaskRcnnModelConfig;
-use crate::data::targets::Targets;
+use crate::annotations::targets::Targets;
 use crate::model::detection::Detection;
 use crate::model::family::{
     one_result, timed_infer, Exporter, Family, ForeignInit, StepLoss, TrainingLoss,

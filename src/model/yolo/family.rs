@@ -11,7 +11,7 @@ use burn::tensor::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 
 use crate::config::YoloModelConfig;
-use crate::data::targets::Targets;
+use crate::annotations::targets::Targets;
 use crate::model::detection::Detection;
 use crate::model::family::{Exporter, Family, ForeignInit, StepLoss, TrainingLoss};
 use crate::model::summary::ModelSummary;
