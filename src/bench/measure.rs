@@ -28,8 +28,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::data::ellipses::ellipse_batch;
 use crate::annotations::targets::Targets;
+use crate::data::ellipses::ellipse_batch;
 use crate::infer::detector::ConfigVisitor;
 use crate::model::family::{Family, TrainingLoss};
 use crate::model::summary::ModelSummary;

@@ -5,7 +5,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::targets::{ImageTargets, Targets};
+use crate::annotations::targets::{ImageTargets, Targets};
 
 /// A batch of procedural images: `[B, 3, size, size]` values in [0, 1] (row-major, channel
 /// planes) and their targets. Each image has `objects` filled ellipses of random colour on a

@@ -18,8 +18,8 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Config, ModelConfig, ModelKind};
 use crate::annotations::targets::Targets;
+use crate::config::{Config, ModelConfig, ModelKind};
 use crate::model::detection::Detection;
 pub use crate::model::family::StepLoss;
 use crate::model::family::{

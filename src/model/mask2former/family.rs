@@ -8,8 +8,8 @@ use anyhow::{bail, Context, Result};
 use burn::tensor::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 
-use crate::config::Mask2FormerModelConfig;
 use crate::annotations::targets::Targets;
+use crate::config::Mask2FormerModelConfig;
 use crate::model::detection::Detection;
 use crate::model::family::{one_result, timed_infer, Family, ForeignInit, StepLoss, TrainingLoss};
 use crate::model::maskrcnn::family::{

@@ -9,8 +9,8 @@ use anyhow::{bail, Context, Result};
 use burn::tensor::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 
-use crate::config::MaskRcnnModelConfig;
 use crate::annotations::targets::Targets;
+use crate::config::MaskRcnnModelConfig;
 use crate::model::detection::Detection;
 use crate::model::family::{
     one_result, timed_infer, Exporter, Family, ForeignInit, StepLoss, TrainingLoss,

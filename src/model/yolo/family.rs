@@ -10,8 +10,8 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 
-use crate::config::YoloModelConfig;
 use crate::annotations::targets::Targets;
+use crate::config::YoloModelConfig;
 use crate::model::detection::Detection;
 use crate::model::family::{Exporter, Family, ForeignInit, StepLoss, TrainingLoss};
 use crate::model::summary::ModelSummary;
