@@ -20,12 +20,18 @@
 #   - `*.log` files and the stdout of `train` (they print wall-clock times) are not
 #     compared; the stdout of `eval --json` and `coco-eval --json` is.
 # It prints one line per differing file and exits 1 if any differ.
+# `DEVICE=ndarray bench/redesign_identity.sh record …` trains, evaluates and predicts on
+# ndarray instead of flex (the default), for refactors that land beside a change of flex's
+# arithmetic; ONNX export's reference outputs are still computed on flex.
 set -euo pipefail
 
 die() { echo "redesign_identity: $*" >&2; exit 2; }
 
 record() {
-    local bin dir
+    local bin dir device
+    # DEVICE=ndarray records through Burn's ndarray backend: a change of flex's own
+    # arithmetic (issue 37's convolution engine) then leaves the comparison meaningful.
+    device=${DEVICE:-flex}
     bin=$(cd "$(dirname "$1")" && pwd)/$(basename "$1")
     dir=$2
     [ -x "$bin" ] || die "not an executable: $1"
@@ -40,10 +46,10 @@ record() {
         cfg=${fam#*:}
         fam=${fam%%:*}
         echo "== train $fam ($cfg --smoke)"
-        "$bin" train --config "$cfg" --smoke --run-dir "runs/$fam" --device flex \
+        "$bin" train --config "$cfg" --smoke --run-dir "runs/$fam" --device "$device" \
             >"stdout/train_$fam.log" 2>&1
         echo "== eval $fam"
-        "$bin" eval --checkpoint "runs/$fam/best.bpk" --split test --json \
+        "$bin" eval --checkpoint "runs/$fam/best.bpk" --split test --json --device "$device" \
             >"stdout/eval_$fam.txt"
     done
     echo "== export"
@@ -68,9 +74,9 @@ record() {
     "$bin" render --out render/proxy --count 2 --size 96 --preset proxy-real \
         >"stdout/render_proxy.txt"
     echo "== predict"
-    "$bin" predict --checkpoint runs/yolo/best.bpk --input render/proxy/images \
+    "$bin" predict --checkpoint runs/yolo/best.bpk --input render/proxy/images --device "$device" \
         --out predict/yolo >"stdout/predict_yolo.txt"
-    "$bin" predict --checkpoint runs/maskrcnn/best.bpk --input render/proxy/images \
+    "$bin" predict --checkpoint runs/maskrcnn/best.bpk --input render/proxy/images --device "$device" \
         --out predict/maskrcnn --augment >"stdout/predict_maskrcnn_tta.txt"
     "$bin" predict --onnx export/yolo.onnx --input render/proxy/images \
         --out predict/yolo_onnx --threads 1 >"stdout/predict_yolo_onnx.txt"
