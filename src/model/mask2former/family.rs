@@ -147,26 +147,14 @@ impl Family for Mask2Former {
     /// `m2f-r<depth>` (the compact preset, [`Mask2FormerConfig::new`]) or
     /// `m2f-r<depth>-paper` ([`Mask2FormerConfig::paper`]).
     fn parse_variant(s: &str) -> Option<Result<Mask2FormerConfig>> {
-        parse_resnet_variant(s, "m2f").map(|r| {
-            r.map(|(depth, paper)| {
-                if paper {
-                    Mask2FormerConfig::paper(depth, 1)
-                } else {
-                    Mask2FormerConfig::new(depth, 1)
-                }
-            })
-        })
+        parse_resnet_variant(s, "m2f").map(|r| r.map(|(depth, paper)| preset(depth, paper)))
     }
     /// As for Mask R-CNN: the decoder width tells the presets apart.
     fn variant_name(c: &Mask2FormerConfig) -> String {
         resnet_variant_name("m2f", c.depth, is_paper(c))
     }
     fn variant_config(c: &Mask2FormerConfig) -> Mask2FormerConfig {
-        if is_paper(c) {
-            Mask2FormerConfig::paper(c.depth, 1)
-        } else {
-            Mask2FormerConfig::new(c.depth, 1)
-        }
+        preset(c.depth, is_paper(c))
     }
 }
 
@@ -177,6 +165,15 @@ impl TrainingLoss for Mask2FormerLosses {
     fn into_step(self) -> StepLoss {
         let v = self.values();
         StepLoss::new(self.total, &v)
+    }
+}
+
+/// The one-class preset of `depth` that `bench models` times: the paper's or the compact.
+fn preset(depth: usize, paper: bool) -> Mask2FormerConfig {
+    if paper {
+        Mask2FormerConfig::paper(depth, 1)
+    } else {
+        Mask2FormerConfig::new(depth, 1)
     }
 }
 

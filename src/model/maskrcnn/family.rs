@@ -158,15 +158,7 @@ impl Family for MaskRcnn {
     /// `mrcnn-r<depth>` (the compact preset, [`MaskRcnnConfig::new`]) or
     /// `mrcnn-r<depth>-paper` ([`MaskRcnnConfig::paper`]).
     fn parse_variant(s: &str) -> Option<Result<MaskRcnnConfig>> {
-        parse_resnet_variant(s, "mrcnn").map(|r| {
-            r.map(|(depth, paper)| {
-                if paper {
-                    MaskRcnnConfig::paper(depth, 1)
-                } else {
-                    MaskRcnnConfig::new(depth, 1)
-                }
-            })
-        })
+        parse_resnet_variant(s, "mrcnn").map(|r| r.map(|(depth, paper)| preset(depth, paper)))
     }
     /// The preset of its depth that its FPN width matches: `-paper` when `fpn_channels` is
     /// the paper preset's (256), the compact model otherwise. The FPN width is the size that
@@ -176,11 +168,7 @@ impl Family for MaskRcnn {
         resnet_variant_name("mrcnn", c.depth, is_paper(c))
     }
     fn variant_config(c: &MaskRcnnConfig) -> MaskRcnnConfig {
-        if is_paper(c) {
-            MaskRcnnConfig::paper(c.depth, 1)
-        } else {
-            MaskRcnnConfig::new(c.depth, 1)
-        }
+        preset(c.depth, is_paper(c))
     }
 }
 
@@ -203,6 +191,15 @@ pub fn resnet_stage_prefixes(n: usize) -> Result<Vec<String>> {
         p.push(format!("backbone.stages.{s}"));
     }
     Ok(p)
+}
+
+/// The one-class preset of `depth` that `bench models` times: the paper's or the compact.
+fn preset(depth: usize, paper: bool) -> MaskRcnnConfig {
+    if paper {
+        MaskRcnnConfig::paper(depth, 1)
+    } else {
+        MaskRcnnConfig::new(depth, 1)
+    }
 }
 
 /// Whether a Mask R-CNN is timed as the paper preset of its depth (its FPN width is the
