@@ -25,12 +25,9 @@ const LONG_FUNCTIONS_ALLOWED: &[(&str, &str)] = &[("src/weights/pickle.rs", "run
 
 /// Long functions not split yet, as (file, function). Like the import lists in
 /// `architecture.rs` this list only shrinks: a long function not listed fails, and so does
-/// a listed one that is gone or short (remove its entry). Left after issue 40's second
-/// session: the YOLO ONNX graph writer and the ultralytics key map.
-const LONG_FUNCTIONS_PENDING: &[(&str, &str)] = &[
-    ("src/model/yolo/onnx.rs", "export_yolo"),
-    ("src/model/yolo/ultralytics.rs", "from_state_dict"),
-];
+/// a listed one that is gone or short (remove its entry). Empty since issue 40's third
+/// session split the YOLO ONNX graph writer and the ultralytics weights reader.
+const LONG_FUNCTIONS_PENDING: &[(&str, &str)] = &[];
 
 /// Long files without the marker that wait for a split; empty since engineer D split
 /// `src/train/trainer.rs`. Shrinks like the list above.

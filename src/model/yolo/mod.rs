@@ -22,6 +22,7 @@ pub mod loss;
 pub mod neck;
 pub mod onnx;
 pub mod postprocess;
+mod onnx_metadata;
 pub mod scale;
 pub mod ultralytics;
 

@@ -13,16 +13,19 @@
 //! `B` is fixed, or the symbol `batch` with `dynamic`. H and W are fixed: the anchor grid
 //! is baked in as constants (ultralytics' `dynamic=True` also frees H and W; we do not).
 //! The metadata keys ultralytics' `AutoBackend` reads (`task`, `stride`, `imgsz`,
-//! `batch`, `names`, …) are written as it writes them (Python literals).
+//! `batch`, `names`, …) are written as it writes them (Python literals, `onnx_metadata`).
 
 use anyhow::{ensure, Result};
 use burn::nn::PaddingConfig2d;
 
 use super::attention::{Attention, C2psa, PsaBlock};
+use super::backbone::Backbone;
 use super::blocks::{Bottleneck, C3k, C3k2, C3k2Inner, ConvBn, Proto, Sppf};
 use super::head::REG_MAX;
+use super::neck::Neck;
+use super::onnx_metadata::metadata;
 use super::{AnchorGrid, YoloOutput, YoloSeg};
-use crate::model::onnx::graph::{Dim, GraphBuilder, OPSET};
+use crate::model::onnx::graph::{Dim, GraphBuilder};
 use crate::model::onnx::layers::conv2d;
 use crate::util::tensor::to_host;
 
@@ -179,21 +182,6 @@ fn proto(g: &mut GraphBuilder, scope: &str, x: &str, p: &Proto) -> Result<String
     conv_bn(g, &format!("{scope}/cv3"), &y, &p.cv3)
 }
 
-/// Python literal of a string (single quotes, as `str(dict)` writes them).
-fn py_str(s: &str) -> String {
-    let mut o = String::from("'");
-    for ch in s.chars() {
-        match ch {
-            '\\' => o.push_str("\\\\"),
-            '\'' => o.push_str("\\'"),
-            '\n' => o.push_str("\\n"),
-            c => o.push(c),
-        }
-    }
-    o.push('\'');
-    o
-}
-
 /// The ONNX model of `model` (eval mode, not necessarily fused) at `input = [H, W]`.
 pub fn export_yolo(
     model: &YoloSeg,
@@ -228,87 +216,137 @@ pub fn export_yolo(
         "images",
         &[batch.clone(), Dim::Fixed(3), Dim::Fixed(h), Dim::Fixed(w)],
     );
+    let [p3, p4, p5] = backbone(&mut g, &m.backbone, &x, input)?;
+    let feats = neck(&mut g, &m.neck, [p3, p4, p5])?;
+    let (proto_out, out0) = segment_head(&mut g, &m, &feats, input)?;
 
-    // Backbone (ultralytics layer indices in the scopes: /model.0 … /model.10).
-    let bb = &m.backbone;
-    let y = conv_bn(&mut g, "/model.0", &x, &bb.l0)?;
-    let y = conv_bn(&mut g, "/model.1", &y, &bb.l1)?;
-    let y = c3k2(&mut g, "/model.2", &y, &bb.l2)?;
-    let y = conv_bn(&mut g, "/model.3", &y, &bb.l3)?;
-    let p3 = c3k2(&mut g, "/model.4", &y, &bb.l4)?;
-    let y = conv_bn(&mut g, "/model.5", &p3, &bb.l5)?;
-    let p4 = c3k2(&mut g, "/model.6", &y, &bb.l6)?;
-    let y = conv_bn(&mut g, "/model.7", &p4, &bb.l7)?;
-    let y = c3k2(&mut g, "/model.8", &y, &bb.l8)?;
-    let mut p5 = sppf(&mut g, "/model.9", &y, &bb.sppf)?;
+    // Prototypes are at twice the finest head level's resolution.
+    let na = AnchorGrid::new(input, &m.strides).num_anchors();
+    let (ph, pw) = (h * 2 / m.strides[0], w * 2 / m.strides[0]);
+    g.output(
+        &out0,
+        "output0",
+        &[batch.clone(), Dim::Fixed(4 + nc + nm), Dim::Fixed(na)],
+    );
+    g.output(
+        &proto_out,
+        "output1",
+        &[batch, Dim::Fixed(nm), Dim::Fixed(ph), Dim::Fixed(pw)],
+    );
+    let meta = metadata(
+        &opts.names,
+        &opts.category_ids,
+        (opts.batch, opts.dynamic),
+        &m.strides,
+        input,
+    );
+    g.finish("chicktrain_yolo_seg", &meta)
+}
+
+/// The backbone as `Backbone::forward` (ultralytics layer indices in the scopes:
+/// /model.0 … /model.10): P3, P4 and P5.
+fn backbone(
+    g: &mut GraphBuilder,
+    bb: &Backbone,
+    x: &str,
+    [h, w]: [usize; 2],
+) -> Result<[String; 3]> {
+    let y = conv_bn(g, "/model.0", x, &bb.l0)?;
+    let y = conv_bn(g, "/model.1", &y, &bb.l1)?;
+    let y = c3k2(g, "/model.2", &y, &bb.l2)?;
+    let y = conv_bn(g, "/model.3", &y, &bb.l3)?;
+    let p3 = c3k2(g, "/model.4", &y, &bb.l4)?;
+    let y = conv_bn(g, "/model.5", &p3, &bb.l5)?;
+    let p4 = c3k2(g, "/model.6", &y, &bb.l6)?;
+    let y = conv_bn(g, "/model.7", &p4, &bb.l7)?;
+    let y = c3k2(g, "/model.8", &y, &bb.l8)?;
+    let mut p5 = sppf(g, "/model.9", &y, &bb.sppf)?;
     if let Some(psa) = &bb.psa {
-        p5 = c2psa(&mut g, "/model.10", &p5, psa, [h / 32, w / 32])?;
+        p5 = c2psa(g, "/model.10", &p5, psa, [h / 32, w / 32])?;
     }
+    Ok([p3, p4, p5])
+}
 
-    // Neck, as `Neck::forward`.
-    let n = &m.neck;
+/// The neck as `Neck::forward` (/model.11 … /model.22): the head's inputs, finest first.
+fn neck(g: &mut GraphBuilder, n: &Neck, [p3, p4, p5]: [String; 3]) -> Result<Vec<String>> {
     let up = g.upsample2x("/model.11", &p5);
     let cat = g.concat("/model.12", &[&up, &p4], 1);
-    let p4_td = c3k2(&mut g, "/model.13", &cat, &n.td_p4)?;
+    let p4_td = c3k2(g, "/model.13", &cat, &n.td_p4)?;
     let (mut feats, p4_out) = match &n.p3 {
         Some(n3) => {
             let up = g.upsample2x("/model.14", &p4_td);
             let cat = g.concat("/model.15", &[&up, &p3], 1);
-            let p3_out = c3k2(&mut g, "/model.16", &cat, &n3.td_p3)?;
-            let d = conv_bn(&mut g, "/model.17", &p3_out, &n3.down_p3)?;
+            let p3_out = c3k2(g, "/model.16", &cat, &n3.td_p3)?;
+            let d = conv_bn(g, "/model.17", &p3_out, &n3.down_p3)?;
             let cat = g.concat("/model.18", &[&d, &p4_td], 1);
-            let p4_out = c3k2(&mut g, "/model.19", &cat, &n3.bu_p4)?;
+            let p4_out = c3k2(g, "/model.19", &cat, &n3.bu_p4)?;
             (vec![p3_out], p4_out)
         }
         None => (Vec::new(), p4_td),
     };
-    let d = conv_bn(&mut g, "/model.20", &p4_out, &n.down_p4)?;
+    let d = conv_bn(g, "/model.20", &p4_out, &n.down_p4)?;
     let cat = g.concat("/model.21", &[&d, &p5], 1);
-    let p5_out = c3k2(&mut g, "/model.22", &cat, &n.bu_p5)?;
+    let p5_out = c3k2(g, "/model.22", &cat, &n.bu_p5)?;
     feats.push(p4_out);
     feats.push(p5_out);
+    Ok(feats)
+}
 
-    // Segment head (ultralytics: cv2 boxes, cv3 classes, cv4 coefficients, proto).
+/// The segment head (/model.23; ultralytics: cv2 boxes, cv3 classes, cv4 coefficients,
+/// proto) with its decoding: the prototypes and `output0` (boxes, scores, coefficients).
+fn segment_head(
+    g: &mut GraphBuilder,
+    m: &YoloSeg,
+    feats: &[String],
+    input: [usize; 2],
+) -> Result<(String, String)> {
     let hd = &m.head;
+    let (nc, nm) = (m.num_classes(), hd.num_masks);
     let s = "/model.23";
-    let proto_out = proto(&mut g, &format!("{s}/proto"), &feats[0], &hd.proto)?;
+    let proto_out = proto(g, &format!("{s}/proto"), &feats[0], &hd.proto)?;
     let (mut boxes, mut cls, mut coef) = (Vec::new(), Vec::new(), Vec::new());
     for (l, f) in feats.iter().enumerate() {
         let b = &hd.boxes[l];
         let sc = format!("{s}/cv2.{l}");
-        let y = conv_bn(&mut g, &format!("{sc}/0"), f, &b.c1)?;
-        let y = conv_bn(&mut g, &format!("{sc}/1"), &y, &b.c2)?;
-        let y = conv2d(&mut g, &format!("{sc}/2"), &y, &b.out)?;
+        let y = conv_bn(g, &format!("{sc}/0"), f, &b.c1)?;
+        let y = conv_bn(g, &format!("{sc}/1"), &y, &b.c2)?;
+        let y = conv2d(g, &format!("{sc}/2"), &y, &b.out)?;
         boxes.push(g.reshape(&sc, &y, &[0, (4 * REG_MAX) as i64, -1]));
         let c = &hd.cls[l];
         let sc = format!("{s}/cv3.{l}");
-        let y = conv_bn(&mut g, &format!("{sc}/0/0"), f, &c.dw1)?;
-        let y = conv_bn(&mut g, &format!("{sc}/0/1"), &y, &c.pw1)?;
-        let y = conv_bn(&mut g, &format!("{sc}/1/0"), &y, &c.dw2)?;
-        let y = conv_bn(&mut g, &format!("{sc}/1/1"), &y, &c.pw2)?;
-        let y = conv2d(&mut g, &format!("{sc}/2"), &y, &c.out)?;
+        let y = conv_bn(g, &format!("{sc}/0/0"), f, &c.dw1)?;
+        let y = conv_bn(g, &format!("{sc}/0/1"), &y, &c.pw1)?;
+        let y = conv_bn(g, &format!("{sc}/1/0"), &y, &c.dw2)?;
+        let y = conv_bn(g, &format!("{sc}/1/1"), &y, &c.pw2)?;
+        let y = conv2d(g, &format!("{sc}/2"), &y, &c.out)?;
         cls.push(g.reshape(&sc, &y, &[0, nc as i64, -1]));
         let k = &hd.coef[l];
         let sc = format!("{s}/cv4.{l}");
-        let y = conv_bn(&mut g, &format!("{sc}/0"), f, &k.c1)?;
-        let y = conv_bn(&mut g, &format!("{sc}/1"), &y, &k.c2)?;
-        let y = conv2d(&mut g, &format!("{sc}/2"), &y, &k.out)?;
+        let y = conv_bn(g, &format!("{sc}/0"), f, &k.c1)?;
+        let y = conv_bn(g, &format!("{sc}/1"), &y, &k.c2)?;
+        let y = conv2d(g, &format!("{sc}/2"), &y, &k.out)?;
         coef.push(g.reshape(&sc, &y, &[0, nm as i64, -1]));
     }
     let cat = |g: &mut GraphBuilder, v: &[String]| {
         let r: Vec<&str> = v.iter().map(String::as_str).collect();
         g.concat(s, &r, 2)
     };
-    let boxes = cat(&mut g, &boxes);
-    let cls = cat(&mut g, &cls);
-    let coef = cat(&mut g, &coef);
+    let boxes = cat(g, &boxes);
+    let cls = cat(g, &cls);
+    let coef = cat(g, &coef);
+    let dbox = decode_boxes(g, s, &boxes, &AnchorGrid::new(input, &m.strides));
+    let scores = g.sigmoid(s, &cls);
+    let out0 = g.concat(s, &[&dbox, &scores, &coef], 1);
+    Ok((proto_out, out0))
+}
 
-    // DFL as ultralytics' `DFL.forward`: softmax over the 16 bins, then a fixed 1×1 conv
-    // with weights 0…15 (the expectation).
-    let grid = AnchorGrid::new(input, &m.strides);
+/// The head's box distributions `[B, 4·16, A]` as xywh boxes in input pixels: DFL as
+/// ultralytics' `DFL.forward` (softmax over the 16 bins, then a fixed 1×1 conv with
+/// weights 0…15, the expectation), then `dist2bbox(xywh=True)` × strides.
+fn decode_boxes(g: &mut GraphBuilder, s: &str, boxes: &str, grid: &AnchorGrid) -> String {
     let na = grid.num_anchors();
     let sd = format!("{s}/dfl");
-    let y = g.reshape(&sd, &boxes, &[0, 4, REG_MAX as i64, -1]);
+    let y = g.reshape(&sd, boxes, &[0, 4, REG_MAX as i64, -1]);
     let y = g.transpose(&sd, &y, &[0, 2, 1, 3]);
     let y = g.softmax(&sd, &y, 1);
     let bins: Vec<f32> = (0..REG_MAX).map(|r| r as f32).collect();
@@ -322,7 +360,7 @@ pub fn export_yolo(
         1,
     );
     let dist = g.reshape(&sd, &y, &[0, 4, -1]);
-    // dist2bbox(xywh=True) × strides, anchors `[2, A]` in grid units.
+    // Anchors `[2, A]` in grid units.
     let points = grid.points();
     let mut anchors = vec![0f32; 2 * na];
     for (a, p) in points.iter().enumerate() {
@@ -339,60 +377,7 @@ pub fn export_yolo(
     let c_xy = g.binary(s, "Div", &sum, &two);
     let wh = g.binary(s, "Sub", &x2y2, &x1y1);
     let xywh = g.concat(s, &[&c_xy, &wh], 1);
-    let dbox = g.binary(s, "Mul", &xywh, &strides);
-    let scores = g.sigmoid(s, &cls);
-    let out0 = g.concat(s, &[&dbox, &scores, &coef], 1);
-
-    // Prototypes are at twice the finest head level's resolution.
-    let (ph, pw) = (h * 2 / m.strides[0], w * 2 / m.strides[0]);
-    g.output(
-        &out0,
-        "output0",
-        &[batch.clone(), Dim::Fixed(4 + nc + nm), Dim::Fixed(na)],
-    );
-    g.output(
-        &proto_out,
-        "output1",
-        &[batch, Dim::Fixed(nm), Dim::Fixed(ph), Dim::Fixed(pw)],
-    );
-
-    let names = opts
-        .names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| format!("{i}: {}", py_str(n)))
-        .collect::<Vec<_>>()
-        .join(", ");
-    let ids = opts
-        .category_ids
-        .iter()
-        .map(|i| i.to_string())
-        .collect::<Vec<_>>()
-        .join(", ");
-    let py_bool = |b: bool| if b { "True" } else { "False" };
-    let meta = vec![
-        ("description".into(), "chicktrain YOLO11-seg model (ultralytics ONNX layout)".into()),
-        ("author".into(), "chicktrain".into()),
-        ("version".into(), env!("CARGO_PKG_VERSION").into()),
-        ("stride".into(), m.strides.iter().max().copied().unwrap_or(32).to_string()),
-        ("task".into(), "segment".into()),
-        ("head".into(), "Segment".into()),
-        ("batch".into(), opts.batch.to_string()),
-        ("imgsz".into(), format!("[{h}, {w}]")),
-        ("names".into(), format!("{{{names}}}")),
-        (
-            "args".into(),
-            format!(
-                "{{'batch': {}, 'dynamic': {}, 'half': False, 'nms': False, 'opset': {OPSET}, 'simplify': False}}",
-                opts.batch,
-                py_bool(opts.dynamic)
-            ),
-        ),
-        ("channels".into(), "3".into()),
-        ("end2end".into(), "False".into()),
-        ("chicktrain_category_ids".into(), format!("[{ids}]")),
-    ];
-    g.finish("chicktrain_yolo_seg", &meta)
+    g.binary(s, "Mul", &xywh, &strides)
 }
 
 /// The ultralytics export layout of a forward pass, computed on the host from the raw

@@ -316,17 +316,79 @@ pub fn from_state_dict(
     // Build the model once for its shapes (random init is cheap next to reading the file).
     let model = cfg.init(&Device::flex());
     let map = key_map(&model)?;
+    let read = read_mapped(t, &map, file, cfg)?;
+    check_dfl(t, file)?;
+    check_unused(t, &read.used, file, cfg)?;
+    let file_classes = t
+        .get("model.23.cv3.0.2.weight")
+        .map(|w| w.shape[0])
+        .unwrap_or(0);
+    let fp = t
+        .get("model.0.conv.weight")
+        .map(|w| w.source_dtype)
+        .unwrap_or("float32");
+    let mut notes = vec![format!(
+        "read {} ultralytics tensors ({}, {fp}) from the {} of {f}",
+        read.snapshots.len(),
+        describe(cfg),
+        sd.origin
+    )];
+    if !read.class_unfit.is_empty() {
+        notes.push(format!(
+            "the checkpoint has {file_classes} classes, the model {}: {} class-head tensors (model.23.cv3) \
+             do not fit and are re-initialised",
+            cfg.num_classes,
+            read.class_unfit.len()
+        ));
+    }
+    if !read.missing.is_empty() {
+        notes.push(format!(
+            "{f} is a detection checkpoint (no mask head): the {} tensors of proto and the mask \
+             coefficients (model.23.proto, cv4) keep their fresh init",
+            read.missing.len()
+        ));
+    }
+    Ok(UltralyticsWeights {
+        snapshots: read.snapshots,
+        class_unfit: read.class_unfit,
+        missing: read.missing,
+        file_classes,
+        notes,
+    })
+}
+
+/// What [`read_mapped`] took from the file: the fitting tensors as snapshots, the
+/// file's keys it used, and the model's tensors it could not fill.
+struct Mapped<'a> {
+    snapshots: Vec<burn_pack::Tensor>,
+    used: Vec<&'a str>,
+    class_unfit: Vec<Unfit>,
+    missing: Vec<String>,
+}
+
+/// Each tensor of the key map from the file, in the map's order: a snapshot when it fits;
+/// an [`Unfit`] class-head tensor of another class count; a missing mask-head tensor of a
+/// detection checkpoint; an error for anything else.
+fn read_mapped<'a>(
+    t: &'a BTreeMap<String, HostTensor>,
+    map: &'a [KeyPair],
+    file: &Path,
+    cfg: &YoloSegConfig,
+) -> Result<Mapped<'a>> {
+    let f = file.display();
     let has_seg_head = t.keys().any(|k| k.starts_with("model.23.proto."));
-    let mut used: Vec<&str> = Vec::new();
-    let mut snapshots = Vec::new();
-    let mut class_unfit = Vec::new();
-    let mut missing = Vec::new();
-    for kp in &map {
+    let mut out = Mapped {
+        snapshots: Vec::new(),
+        used: Vec::new(),
+        class_unfit: Vec::new(),
+        missing: Vec::new(),
+    };
+    for kp in map {
         let seg_head =
             kp.theirs.starts_with("model.23.proto.") || kp.theirs.starts_with("model.23.cv4.");
         let Some(ft) = t.get(&kp.theirs) else {
             if seg_head && !has_seg_head {
-                missing.push(kp.ours.clone());
+                out.missing.push(kp.ours.clone());
                 continue;
             }
             bail!(
@@ -337,10 +399,10 @@ pub fn from_state_dict(
                 describe(cfg)
             );
         };
-        used.push(&kp.theirs);
+        out.used.push(&kp.theirs);
         if ft.shape != kp.shape {
             if kp.theirs.starts_with("model.23.cv3.") {
-                class_unfit.push(Unfit {
+                out.class_unfit.push(Unfit {
                     ours: kp.ours.clone(),
                     theirs: kp.theirs.clone(),
                     file_shape: ft.shape.clone(),
@@ -366,7 +428,7 @@ pub fn from_state_dict(
             );
         };
         let (bytes, shape, dtype) = TensorData::new(v.clone(), kp.shape.clone()).into_parts();
-        snapshots.push(burn_pack::Tensor::new(
+        out.snapshots.push(burn_pack::Tensor::new(
             kp.ours.clone(),
             dtype,
             shape,
@@ -374,16 +436,33 @@ pub fn from_state_dict(
             bytes,
         ));
     }
+    Ok(out)
+}
+
+/// The file's DFL projection, if it has one, must be the fixed `arange(16)` ours is.
+fn check_dfl(t: &BTreeMap<String, HostTensor>, file: &Path) -> Result<()> {
     if let Some(dfl) = t.get(DFL_KEY) {
         let expect: Vec<f32> = (0..REG_MAX).map(|i| i as f32).collect();
         if dfl.shape != [1, REG_MAX, 1, 1] || dfl.to_f32() != expect {
             bail!(
-                "{f}: {DFL_KEY} is not the fixed arange({REG_MAX}) projection ultralytics builds (shape {:?}); \
+                "{}: {DFL_KEY} is not the fixed arange({REG_MAX}) projection ultralytics builds (shape {:?}); \
                  chicktrain decodes boxes with that projection",
+                file.display(),
                 dfl.shape
             );
         }
     }
+    Ok(())
+}
+
+/// Every key of the file must have been `used` (BatchNorm's `num_batches_tracked` and the
+/// DFL projection aside): a key left over is another architecture.
+fn check_unused(
+    t: &BTreeMap<String, HostTensor>,
+    used: &[&str],
+    file: &Path,
+    cfg: &YoloSegConfig,
+) -> Result<()> {
     let mut extra: Vec<&String> = t
         .keys()
         .filter(|k| {
@@ -399,49 +478,15 @@ pub fn from_state_dict(
     extra.sort_by(|a, b| natural_cmp(a, b));
     if let Some(k) = extra.first() {
         bail!(
-            "{f}: key {k} (shape {:?}) has no place in {} — {} keys do not fit; a checkpoint of \
+            "{}: key {k} (shape {:?}) has no place in {} — {} keys do not fit; a checkpoint of \
              another architecture (YOLOv8, YOLO26, a larger head)?",
+            file.display(),
             t[*k].shape,
             describe(cfg),
             extra.len()
         );
     }
-    let file_classes = t
-        .get("model.23.cv3.0.2.weight")
-        .map(|w| w.shape[0])
-        .unwrap_or(0);
-    let fp = t
-        .get("model.0.conv.weight")
-        .map(|w| w.source_dtype)
-        .unwrap_or("float32");
-    let mut notes = vec![format!(
-        "read {} ultralytics tensors ({}, {fp}) from the {} of {f}",
-        snapshots.len(),
-        describe(cfg),
-        sd.origin
-    )];
-    if !class_unfit.is_empty() {
-        notes.push(format!(
-            "the checkpoint has {file_classes} classes, the model {}: {} class-head tensors (model.23.cv3) \
-             do not fit and are re-initialised",
-            cfg.num_classes,
-            class_unfit.len()
-        ));
-    }
-    if !missing.is_empty() {
-        notes.push(format!(
-            "{f} is a detection checkpoint (no mask head): the {} tensors of proto and the mask \
-             coefficients (model.23.proto, cv4) keep their fresh init",
-            missing.len()
-        ));
-    }
-    Ok(UltralyticsWeights {
-        snapshots,
-        class_unfit,
-        missing,
-        file_classes,
-        notes,
-    })
+    Ok(())
 }
 
 /// Applies weights that cover the whole model, strictly (every tensor present, none unused,
