@@ -7,8 +7,9 @@
 //!
 //! | layer | modules |
 //! |---|---|
-//! | foundation | [`util`], [`weights`] (PyTorch / safetensors files as host state dicts), [`config`], [`annotations`] (COCO, masks, LabelMe, splits, the ground truth [`annotations::targets`]) |
-//! | models | [`model`] (YOLO-seg, Mask R-CNN, Mask2Former; read `annotations::targets`, import only the foundation) |
+//! | foundation | [`util`], [`weights`] (PyTorch / safetensors files as host state dicts), [`annotations`] (COCO, masks, LabelMe, splits, the ground truth [`annotations::targets`]) |
+//! | models | [`model`] (YOLO-seg, Mask R-CNN, Mask2Former, each with its `[model]` table; read `annotations::targets`, import only the foundation) |
+//! | config | [`config`] (the typed run config; its `[model]` is the model layer's `ModelConfig`) |
 //! | renderer | [`render`] (writes COCO through `annotations`) |
 //! | loader | [`data`] (real + rendered samples, augmentation, batches of `annotations::targets`) |
 //! | evaluator | [`eval`] (pycocotools-exact; reads only `annotations`) |
@@ -21,8 +22,9 @@
 //!
 //! The default `train` feature brings in Burn: [`model`], [`infer`], [`export`],
 //! [`train`], [`bench`], [`experiments`] and the training side of [`data`]. Without it
-//! (`default-features = false`) the crate is the annotation layer, renderer and
-//! evaluator, which the fuzz targets in `fuzz/` build.
+//! (`default-features = false`) the crate is the annotation layer, the config's tables
+//! (not the root `Config`), renderer and evaluator, which the fuzz targets in `fuzz/`
+//! build.
 
 pub mod annotations;
 #[cfg(feature = "train")]

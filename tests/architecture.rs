@@ -26,8 +26,9 @@ mod sizes;
 /// rows before it, never from a row after it. Within a row the module graph must still
 /// be acyclic (checked separately).
 const LAYERS: &[(&str, &[&str])] = &[
-    ("foundation", &["util", "weights", "config", "annotations"]),
+    ("foundation", &["util", "weights", "annotations"]),
     ("models", &["model"]),
+    ("config", &["config"]),
     ("renderer", &["render"]),
     ("loader", &["data"]),
     ("evaluator", &["eval"]),

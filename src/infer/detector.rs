@@ -4,12 +4,12 @@
 //! does (optimiser, EMA, clipping, checkpoints) works on any Burn [`Module`], so it serves
 //! every variant unchanged.
 //!
-//! This is where a model family is registered: one line in the [`families!`] list below
-//! (its [`Detector`] variant, which names its Burn record in checkpoints, and its
-//! [`DetectorConfig`] variant, which is its `model.kind` and its `[model]` table's
-//! `config::ModelConfig` variant). Every method here dispatches to the family's
-//! [`Family`] implementation in `model/<family>/family.rs`; nothing else in the crate
-//! matches on the families.
+//! The families are registered in `model/mod.rs` (`model::with_families!`, which hands its
+//! list to [`families!`] here): each family's [`Detector`] variant names its Burn record in
+//! checkpoints, and its [`DetectorConfig`] variant is its `model.kind` and its `[model]`
+//! table's `ModelConfig` variant. Every method here dispatches to the family's [`Family`]
+//! implementation in `model/<family>/family.rs`; nothing else in the crate matches on the
+//! families.
 
 use std::path::Path;
 
@@ -25,12 +25,9 @@ pub use crate::model::family::StepLoss;
 use crate::model::family::{
     exporter, seeded_loss, ExportFormat, ExportRequest, Family, ForeignInit,
 };
-use crate::model::mask2former::{Mask2Former, Mask2FormerConfig};
-use crate::model::maskrcnn::{MaskRcnn, MaskRcnnConfig};
 use crate::model::summary::ModelSummary;
 use crate::model::weights::{self, Applied, Format};
 pub use crate::model::yolo::family::{VAL_IOU, VAL_MAX_DET};
-use crate::model::yolo::{YoloSeg, YoloSegConfig};
 
 /// Validation score threshold (ultralytics' val default; Mask R-CNN applies its own,
 /// higher threshold first). YOLO's NMS IoU and detection cap are [`VAL_IOU`] and
@@ -45,18 +42,22 @@ pub trait ConfigVisitor {
     fn visit<F: Family>(self, config: &F::Config) -> Self::Out;
 }
 
-/// The registration list: `DetectorVariant(ModelType), ConfigVariant(ConfigType);` per
-/// family. It defines [`DetectorConfig`] and [`Detector`] and the dispatch of every method
-/// below to the family's [`Family`] implementation; the arms are one-liners on purpose
-/// (the logic is the family's, or in the plain methods after the list).
+/// Called with the registration list of `model/mod.rs` (`model::with_families!`): defines
+/// [`DetectorConfig`] (each family's `Family::Config`) and [`Detector`] (each family's
+/// model type) and the dispatch of every method below to the family's [`Family`]
+/// implementation; the arms are one-liners on purpose (the logic is the family's, or in
+/// the plain methods after the list).
 macro_rules! families {
-    ($($V:ident($M:ty), $C:ident($MC:ty);)+) => {
+    ($($m:ident: $C:ident($T:ident) = $name:literal, $V:ident($M:ident);)+) => {
+        families! { @ $($V(crate::model::$m::$M), $C;)+ }
+    };
+    (@ $($V:ident($M:ty), $C:ident;)+) => {
         /// Model config of a checkpoint: the kind and everything needed to rebuild the
         /// weights.
         #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
         #[serde(tag = "kind", rename_all = "lowercase")]
         pub enum DetectorConfig {
-            $($C($MC),)+
+            $($C(<$M as Family>::Config),)+
         }
 
         /// A trainable instance-segmentation model.
@@ -203,11 +204,7 @@ macro_rules! families {
     };
 }
 
-families! {
-    Yolo(YoloSeg), Yolo(YoloSegConfig);
-    MaskRcnn(MaskRcnn), Maskrcnn(MaskRcnnConfig);
-    Mask2Former(Mask2Former), Mask2former(Mask2FormerConfig);
-}
+crate::model::with_families!(families);
 
 impl DetectorConfig {
     /// The model of run config `cfg` with `nc` classes.
@@ -254,6 +251,8 @@ impl Detector {
 mod tests {
     use super::*;
     use crate::config;
+    use crate::model::mask2former::Mask2FormerConfig;
+    use crate::model::maskrcnn::MaskRcnnConfig;
 
     fn load(name: &str, ov: &[&str]) -> Config {
         let ov: Vec<String> = ov.iter().map(|s| s.to_string()).collect();

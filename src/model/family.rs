@@ -2,9 +2,10 @@
 //! is built, its loss with named terms, its inference to [`Detection`]s, its freeze
 //! stages, the foreign weights it starts from, its `--smoke` sizes, its `bench models`
 //! names and probe. Everything outside `model/<family>/` reaches a family through this
-//! trait; the families are registered in one list (`infer::detector`'s `families!`),
-//! which builds the closed enums (`Detector`, `DetectorConfig`) the trainer, the
-//! checkpoints and the benches work on.
+//! trait; the families are registered in one list (`model/mod.rs`'s `with_families!`),
+//! which builds the `[model]` enums here (`ModelKind`, `ModelConfig`) and the closed
+//! enums in `infer::detector` (`Detector`, `DetectorConfig`) the trainer, the checkpoints
+//! and the benches work on.
 //!
 //! The shape follows detectron2's `META_ARCH_REGISTRY` (a family is found by its config
 //! `kind`, nothing else names it) with Rust's usual answer to Burn's constraints: the
@@ -12,9 +13,9 @@
 //! associated types say which config builds it, and the enum at the registration point
 //! dispatches (Burn modules are not object-safe, so there is no `dyn Family`).
 //!
-//! What is not here: the `[model]` table itself (`config::model`, the foundation layer,
-//! below this one), and the command side of export (`export/`: loading the checkpoint,
-//! refusing a format a family lacks by name).
+//! What is not here: the `[model]` table itself (`model/<family>/config.rs`, checked
+//! through `model::section::ModelSection`), and the command side of export (`export/`:
+//! loading the checkpoint, refusing a format a family lacks by name).
 
 use std::fmt::Debug;
 use std::path::Path;
@@ -126,7 +127,7 @@ impl ExportFormat {
 pub trait Family: Module + Sized {
     /// The family's typed model config (stored in checkpoint headers, so serde).
     type Config: Clone + Debug + PartialEq + Serialize + DeserializeOwned;
-    /// The family's `[model]` table (`config::model`).
+    /// The family's `[model]` table (`model/<family>/config.rs`).
     type Section;
     /// The loss of a training batch, with its named terms.
     type Loss: TrainingLoss;

@@ -4,22 +4,23 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::Result;
 use burn::tensor::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 
 use crate::annotations::targets::Targets;
-use crate::config::Mask2FormerModelConfig;
 use crate::model::detection::Detection;
 use crate::model::family::{one_result, timed_infer, Family, ForeignInit, StepLoss, TrainingLoss};
 use crate::model::maskrcnn::family::{
-    parse_resnet_variant, resnet_stage_prefixes, resnet_variant_name,
+    parse_resnet_variant, read_torchvision, resnet_stage_prefixes, resnet_variant_name,
 };
-use crate::model::maskrcnn::torchvision::{self, TorchvisionKind};
+use crate::model::maskrcnn::torchvision::TorchvisionKind;
 use crate::model::summary::ModelSummary;
 use crate::model::weights::{self, Format};
 
-use super::{class_dependent, Mask2Former, Mask2FormerConfig, Mask2FormerLosses};
+use super::{
+    class_dependent, Mask2Former, Mask2FormerConfig, Mask2FormerLosses, Mask2FormerModelConfig,
+};
 
 impl Family for Mask2Former {
     type Config = Mask2FormerConfig;
@@ -105,13 +106,7 @@ impl Family for Mask2Former {
         format: Format,
         origin: &str,
     ) -> Result<ForeignInit<Self>> {
-        if format == Format::Chicktrain {
-            bail!("{origin}: a chicktrain checkpoint is not a foreign weights file");
-        }
-        let tensors = weights::read_file(path, &["model", "state_dict"])
-            .with_context(|| origin.to_string())?;
-        let mapped = torchvision::map_state_dict(tensors, self.num_classes())
-            .with_context(|| origin.to_string())?;
+        let mapped = read_torchvision(path, format, origin, self.num_classes())?;
         let what = match mapped.kind {
             TorchvisionKind::ResNet => format!("{}, torchvision ResNet (backbone)", format.name()),
             _ => format!("{}, torchvision Mask R-CNN (its backbone)", format.name()),

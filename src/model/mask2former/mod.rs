@@ -17,6 +17,7 @@
 //! layers, 25 queries, 3136 points); [`Mask2FormerConfig::paper`] the paper's R50 sizes
 //! (256-wide, 9 layers, 100 queries, 12544 points, 8 heads, FFN 2048).
 
+pub mod config;
 pub mod criterion;
 pub mod family;
 pub mod masked_attention;
@@ -35,12 +36,12 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::annotations::targets::ImageTargets;
-use crate::config::{Mask2FormerModelConfig, Mask2FormerPreset};
 use crate::model::detection::Detection;
 use crate::model::maskrcnn::resnet::{self, ResNet};
-use crate::model::maskrcnn::{PIXEL_MEAN, PIXEL_STD};
+use crate::model::maskrcnn::{check_batch, check_input, check_scale, normalize};
 use crate::model::summary::ModelSummary;
-use crate::util::tensor::{host, to_host};
+use crate::util::tensor::to_host;
+pub use config::{Mask2FormerModelConfig, Mask2FormerPreset};
 use criterion::{set_criterion, LayerOutput};
 pub use criterion::{CriterionConfig, Mask2FormerLosses};
 use pixel_decoder::PixelDecoder;
@@ -151,16 +152,7 @@ impl Mask2FormerConfig {
             self.hidden_dim,
             self.heads
         );
-        assert!(
-            self.width_mult.is_finite() && self.width_mult > 0.0,
-            "Mask2FormerConfig: width_mult must be finite and > 0, got {}",
-            self.width_mult
-        );
-        assert!(
-            self.input_size >= 64 && self.input_size % 32 == 0,
-            "Mask2FormerConfig: input_size must be a multiple of 32 and ≥ 64, got {}",
-            self.input_size
-        );
+        check_scale("Mask2FormerConfig", self.width_mult, self.input_size);
     }
 
     pub fn init(&self, device: &Device) -> Mask2Former {
@@ -206,21 +198,9 @@ pub struct Mask2Former {
 }
 
 impl Mask2Former {
-    fn check_input(&self, images: &Tensor<4>) -> [usize; 2] {
-        let [b, c, h, w] = images.dims();
-        assert!(
-            b > 0 && c == 3 && h >= 64 && w >= 64 && h % 32 == 0 && w % 32 == 0,
-            "Mask2Former expects [B, 3, H, W] with H, W multiples of 32 and ≥ 64, got [{b}, {c}, {h}, {w}]"
-        );
-        [h, w]
-    }
-
     /// The L + 1 predictions of a batch of `[0, 1]` images.
     pub fn forward(&self, images: Tensor<4>) -> Vec<LayerOutput> {
-        let device = images.device();
-        let mean: Tensor<4> = host(PIXEL_MEAN.to_vec(), [1, 3, 1, 1], &device);
-        let std: Tensor<4> = host(PIXEL_STD.to_vec(), [1, 3, 1, 1], &device);
-        let c = self.backbone.forward((images - mean) / std);
+        let c = self.backbone.forward(normalize(images));
         let (mask_features, multi) = self.pixel_decoder.forward(c);
         self.transformer_decoder.forward(&multi, &mask_features)
     }
@@ -235,14 +215,8 @@ impl Mask2Former {
         targets: &[ImageTargets],
         rng: &mut R,
     ) -> Mask2FormerLosses {
-        let [h, w] = self.check_input(&images);
-        let b = images.dims()[0];
-        assert_eq!(
-            targets.len(),
-            b,
-            "Mask2Former::forward_train: {} targets for a batch of {b}",
-            targets.len()
-        );
+        let [h, w] = check_input(&images, "Mask2Former");
+        check_batch(targets, images.dims()[0], "Mask2Former::forward_train");
         for (i, t) in targets.iter().enumerate() {
             assert!(
                 t.classes.len() == t.masks.len()
@@ -260,7 +234,7 @@ impl Mask2Former {
 
     /// Inference: per image at most `top_k` detections. Call on `model.valid()`.
     pub fn forward_infer(&self, images: Tensor<4>) -> Vec<Vec<Detection>> {
-        let [ih, iw] = self.check_input(&images);
+        let [ih, iw] = check_input(&images, "Mask2Former");
         let out = self.forward(images).pop().expect("at least one prediction");
         let [b, q, c1] = out.class_logits.dims();
         let [_, _, h, w] = out.mask_logits.dims();

@@ -10,7 +10,6 @@ use burn::tensor::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 
 use crate::annotations::targets::Targets;
-use crate::config::MaskRcnnModelConfig;
 use crate::model::detection::Detection;
 use crate::model::family::{
     one_result, timed_infer, Exporter, Family, ForeignInit, StepLoss, TrainingLoss,
@@ -20,7 +19,7 @@ use crate::model::weights::{self, Format};
 
 use super::export;
 use super::torchvision::{self, TorchvisionKind};
-use super::{class_dependent, MaskRcnn, MaskRcnnConfig, MaskRcnnLosses};
+use super::{class_dependent, MaskRcnn, MaskRcnnConfig, MaskRcnnLosses, MaskRcnnModelConfig};
 
 impl Family for MaskRcnn {
     type Config = MaskRcnnConfig;
@@ -105,14 +104,7 @@ impl Family for MaskRcnn {
         format: Format,
         origin: &str,
     ) -> Result<ForeignInit<Self>> {
-        if format == Format::Chicktrain {
-            bail!("{origin}: a chicktrain checkpoint is not a foreign weights file");
-        }
-        let tensors = weights::read_file(path, &["model", "state_dict"])
-            .with_context(|| origin.to_string())?;
-        let nc = self.num_classes();
-        let mapped =
-            torchvision::map_state_dict(tensors, nc).with_context(|| origin.to_string())?;
+        let mapped = read_torchvision(path, format, origin, self.num_classes())?;
         let fresh_why = if mapped.kind == TorchvisionKind::ResNet {
             "an ImageNet ResNet file holds the backbone only"
         } else {
@@ -191,6 +183,23 @@ pub fn resnet_stage_prefixes(n: usize) -> Result<Vec<String>> {
         p.push(format!("backbone.stages.{s}"));
     }
     Ok(p)
+}
+
+/// A torchvision file (an ImageNet ResNet or `maskrcnn_resnet50_fpn` state dict) under
+/// chicktrain's keys for a model of `num_classes`: what `model.init` of both ResNet
+/// families reads (`origin` names it in errors).
+pub fn read_torchvision(
+    path: &Path,
+    format: Format,
+    origin: &str,
+    num_classes: usize,
+) -> Result<torchvision::Mapped> {
+    if format == Format::Chicktrain {
+        bail!("{origin}: a chicktrain checkpoint is not a foreign weights file");
+    }
+    let tensors =
+        weights::read_file(path, &["model", "state_dict"]).with_context(|| origin.to_string())?;
+    torchvision::map_state_dict(tensors, num_classes).with_context(|| origin.to_string())
 }
 
 /// The one-class preset of `depth` that `bench models` times: the paper's or the compact.

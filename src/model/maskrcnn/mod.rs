@@ -16,6 +16,7 @@
 
 pub mod anchors;
 pub mod box_coder;
+pub mod config;
 pub mod export;
 pub mod family;
 pub mod fpn;
@@ -38,12 +39,12 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 pub use crate::annotations::targets::ImageTargets;
-use crate::config::{MaskRcnnModelConfig, MaskRcnnPreset};
 pub use crate::model::detection::Detection;
 use crate::model::instance_mask::MaskSource;
 pub use crate::model::summary::ModelSummary;
 use crate::util::tensor::{host, to_host};
 use anchors::AnchorConfig;
+pub use config::{MaskRcnnModelConfig, MaskRcnnPreset};
 use fpn::Fpn;
 use mask_head::{mask_loss, mask_targets, MaskHead, MaskHeadConfig};
 use pooler::pool_levels;
@@ -57,6 +58,49 @@ pub const STRIDES: [usize; 5] = [4, 8, 16, 32, 64];
 /// `pixel_mean` / `pixel_std`, rescaled), so the trainer feeds both models the same images.
 pub const PIXEL_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
 pub const PIXEL_STD: [f32; 3] = [0.229, 0.224, 0.225];
+
+/// `[0, 1]` images as the ResNet takes them, `(x − PIXEL_MEAN) / PIXEL_STD` per channel
+/// (Mask R-CNN's and Mask2Former's backbone input).
+pub fn normalize(images: Tensor<4>) -> Tensor<4> {
+    let device = images.device();
+    let mean: Tensor<4> = host(PIXEL_MEAN.to_vec(), [1, 3, 1, 1], &device);
+    let std: Tensor<4> = host(PIXEL_STD.to_vec(), [1, 3, 1, 1], &device);
+    (images - mean) / std
+}
+
+/// `[H, W]` of a batch for a ResNet-FPN model (`model` names it in the panic): `[B, 3, H,
+/// W]` with B ≥ 1 and H, W multiples of 32 and at least 64.
+pub fn check_input(images: &Tensor<4>, model: &str) -> [usize; 2] {
+    let [b, c, h, w] = images.dims();
+    assert!(
+        b > 0 && c == 3 && h >= 64 && w >= 64 && h % 32 == 0 && w % 32 == 0,
+        "{model} expects [B, 3, H, W] with H, W multiples of 32 and ≥ 64, got [{b}, {c}, {h}, {w}]"
+    );
+    [h, w]
+}
+
+/// The checks every ResNet-FPN model config makes (`config` names it in the panic): a
+/// finite, positive `width_mult` and an `input_size` that is a multiple of 32 and ≥ 64.
+pub fn check_scale(config: &str, width_mult: f64, input_size: usize) {
+    assert!(
+        width_mult.is_finite() && width_mult > 0.0,
+        "{config}: width_mult must be finite and > 0, got {width_mult}"
+    );
+    assert!(
+        input_size >= 64 && input_size % 32 == 0,
+        "{config}: input_size must be a multiple of 32 and ≥ 64, got {input_size}"
+    );
+}
+
+/// One targets entry per image of a batch of `b` (`caller` names it in the panic).
+pub fn check_batch(targets: &[ImageTargets], b: usize, caller: &str) {
+    assert_eq!(
+        targets.len(),
+        b,
+        "{caller}: {} targets for a batch of {b}",
+        targets.len()
+    );
+}
 
 /// Model options. [`MaskRcnnConfig::new`] gives the compact preset, [`MaskRcnnConfig::paper`]
 /// the detectron2 sizes; [`MaskRcnnConfig::init`] validates and panics naming the bad value.
@@ -174,16 +218,7 @@ impl MaskRcnnConfig {
             "MaskRcnnConfig: num_classes must be > 0, got {}",
             self.num_classes
         );
-        assert!(
-            self.width_mult.is_finite() && self.width_mult > 0.0,
-            "MaskRcnnConfig: width_mult must be finite and > 0, got {}",
-            self.width_mult
-        );
-        assert!(
-            self.input_size >= 64 && self.input_size % 32 == 0,
-            "MaskRcnnConfig: input_size must be a multiple of 32 and ≥ 64, got {}",
-            self.input_size
-        );
+        check_scale("MaskRcnnConfig", self.width_mult, self.input_size);
         assert!(
             self.fpn_channels > 0,
             "MaskRcnnConfig: fpn_channels must be > 0, got {}",
@@ -269,25 +304,12 @@ pub struct MaskRcnn {
 }
 
 impl MaskRcnn {
-    fn check_input(&self, images: &Tensor<4>) -> [usize; 2] {
-        let [b, c, h, w] = images.dims();
-        assert!(
-            b > 0 && c == 3 && h >= 64 && w >= 64 && h % 32 == 0 && w % 32 == 0,
-            "MaskRcnn expects [B, 3, H, W] with H, W multiples of 32 and ≥ 64, got [{b}, {c}, {h}, {w}]"
-        );
-        [h, w]
-    }
-
     /// P2…P6 of normalised images.
     ///
     /// # Shapes
     /// - `images`: `[B, 3, H, W]` in `[0, 1]` → 5 × `[B, fpn_channels, H/s, W/s]`, s = 4…64
     pub fn features(&self, images: Tensor<4>) -> Vec<Tensor<4>> {
-        let device = images.device();
-        let mean: Tensor<4> = host(PIXEL_MEAN.to_vec(), [1, 3, 1, 1], &device);
-        let std: Tensor<4> = host(PIXEL_STD.to_vec(), [1, 3, 1, 1], &device);
-        self.fpn
-            .forward(self.backbone.forward((images - mean) / std))
+        self.fpn.forward(self.backbone.forward(normalize(images)))
     }
 
     /// Training forward: all losses of a batch. `rng` drives anchor and RoI sampling.
@@ -301,14 +323,8 @@ impl MaskRcnn {
         targets: &[ImageTargets],
         rng: &mut R,
     ) -> MaskRcnnLosses {
-        let [h, w] = self.check_input(&images);
-        let b = images.dims()[0];
-        assert_eq!(
-            targets.len(),
-            b,
-            "MaskRcnn::forward_train: {} targets for a batch of {b}",
-            targets.len()
-        );
+        let [h, w] = check_input(&images, "MaskRcnn");
+        check_batch(targets, images.dims()[0], "MaskRcnn::forward_train");
         for (i, t) in targets.iter().enumerate() {
             assert!(
                 t.classes.len() == t.boxes.len() && t.masks.len() == t.boxes.len(),
@@ -395,7 +411,7 @@ impl MaskRcnn {
     /// # Shapes
     /// - `images`: `[B, 3, H, W]` in `[0, 1]` → `B` lists; `mask` holds `M × M` probabilities
     pub fn forward_infer(&self, images: Tensor<4>) -> Vec<Vec<Detection>> {
-        self.check_input(&images);
+        check_input(&images, "MaskRcnn");
         infer(self, &self.config, images).expect("chicktrain's own modules do not fail")
     }
 

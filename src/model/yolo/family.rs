@@ -11,7 +11,6 @@ use burn::tensor::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 
 use crate::annotations::targets::Targets;
-use crate::config::YoloModelConfig;
 use crate::model::detection::Detection;
 use crate::model::family::{Exporter, Family, ForeignInit, StepLoss, TrainingLoss};
 use crate::model::summary::ModelSummary;
@@ -21,7 +20,9 @@ use crate::util::tensor::to_host;
 use super::export;
 use super::loss::{yolo_loss, LossTerms, LossWeights};
 use super::postprocess::postprocess;
-use super::{class_dependent, ultralytics, HeadLevels, Scale, YoloSeg, YoloSegConfig};
+use super::{
+    class_dependent, ultralytics, HeadLevels, Scale, YoloModelConfig, YoloSeg, YoloSegConfig,
+};
 
 /// Validation postprocess settings of YOLO (ultralytics' val defaults).
 pub const VAL_IOU: f32 = 0.7;

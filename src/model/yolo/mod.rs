@@ -15,14 +15,15 @@ pub mod assigner;
 pub mod attention;
 pub mod backbone;
 pub mod blocks;
+pub mod config;
 pub mod export;
 pub mod family;
 pub mod head;
 pub mod loss;
 pub mod neck;
 pub mod onnx;
-pub mod postprocess;
 mod onnx_metadata;
+pub mod postprocess;
 pub mod scale;
 pub mod ultralytics;
 
@@ -38,7 +39,7 @@ use neck::Neck;
 pub use scale::Scale;
 use scale::Scaler;
 
-use crate::config::{YoloModelConfig, YoloScale};
+pub use config::{YoloModelConfig, YoloScale};
 
 /// Scene-sized options of a YOLO-seg model. Build with [`YoloSegConfig::new`] and the
 /// `with_*` setters; [`YoloSegConfig::init`] validates and panics naming the bad value.

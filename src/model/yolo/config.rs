@@ -3,7 +3,7 @@
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
-use super::section::ModelSection;
+use crate::model::section::ModelSection;
 
 /// YOLO11-seg size preset (ultralytics' `n` and `s`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -18,14 +18,14 @@ pub enum YoloScale {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct YoloModelConfig {
-    #[serde(default = "super::section::default_one")]
+    #[serde(default = "crate::model::section::default_one")]
     pub width_mult: f64,
     #[serde(default)]
     pub scale: YoloScale,
     /// Head levels: `[3, 4, 5]` (P3–P5, ultralytics) or `[4, 5]` (scene-sized).
     #[serde(default = "default_levels")]
     pub levels: Vec<u32>,
-    #[serde(default = "super::section::default_true")]
+    #[serde(default = "crate::model::section::default_true")]
     pub c2psa: bool,
     /// Mask prototypes (ultralytics: 32).
     #[serde(default = "default_prototypes")]
@@ -37,12 +37,6 @@ pub struct YoloModelConfig {
     pub init: Option<String>,
 }
 
-impl Default for YoloModelConfig {
-    fn default() -> Self {
-        toml::from_str("").expect("yolo model defaults")
-    }
-}
-
 fn default_levels() -> Vec<u32> {
     vec![3, 4, 5]
 }
@@ -51,12 +45,6 @@ fn default_prototypes() -> usize {
 }
 
 impl ModelSection for YoloModelConfig {
-    fn init(&self) -> Option<&str> {
-        self.init.as_deref()
-    }
-    fn width_mult(&self) -> f64 {
-        self.width_mult
-    }
     fn validate(&self, _crop: u32) -> Result<()> {
         if self.levels != [3, 4, 5] && self.levels != [4, 5] {
             bail!(

@@ -3,7 +3,7 @@
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
-use super::section::{self, ModelSection};
+use crate::model::section::{self, ModelSection};
 
 /// Size preset of a Mask R-CNN: `compact` (CPU- and scene-sized) or `paper` (detectron2's
 /// R-FPN sizes). Single `model.*` keys override either.
@@ -20,10 +20,10 @@ pub enum MaskRcnnPreset {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MaskRcnnModelConfig {
-    #[serde(default = "super::section::default_one")]
+    #[serde(default = "crate::model::section::default_one")]
     pub width_mult: f64,
     /// ResNet depth: 18, 34, 50 or 101.
-    #[serde(default = "super::section::default_depth")]
+    #[serde(default = "crate::model::section::default_depth")]
     pub depth: usize,
     #[serde(default)]
     pub preset: MaskRcnnPreset,
@@ -61,28 +61,11 @@ pub struct MaskRcnnModelConfig {
     pub init: Option<String>,
 }
 
-impl Default for MaskRcnnModelConfig {
-    fn default() -> Self {
-        toml::from_str("").expect("maskrcnn model defaults")
-    }
-}
-
 impl ModelSection for MaskRcnnModelConfig {
-    fn init(&self) -> Option<&str> {
-        self.init.as_deref()
-    }
-    fn width_mult(&self) -> f64 {
-        self.width_mult
-    }
     /// `crop` is `data.crop` (a Mask R-CNN needs 64).
     fn validate(&self, crop: u32) -> Result<()> {
         let m = self;
-        if ![18, 34, 50, 101].contains(&m.depth) {
-            bail!("model.depth = {} must be 18, 34, 50 or 101", m.depth);
-        }
-        if crop < 64 {
-            bail!("data.crop = {crop} must be at least 64 for model.kind = \"maskrcnn\"");
-        }
+        section::check_resnet(m.depth, crop, "maskrcnn")?;
         if let Some(a) = &m.anchor_sizes {
             if a.len() != 5 || a.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
                 bail!("model.anchor_sizes = {a:?} must be 5 positive sizes in pixels (P2…P6)");

@@ -4,7 +4,7 @@
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
-use super::section::{self, ModelSection};
+use crate::model::section::{self, ModelSection};
 
 /// Size preset of a Mask2Former: `compact` (CPU- and scene-sized: 128-wide, 6 decoder
 /// layers, 25 queries, 3136 points) or `paper` (the paper's R50 sizes: 256-wide, 9 layers,
@@ -22,10 +22,10 @@ pub enum Mask2FormerPreset {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Mask2FormerModelConfig {
-    #[serde(default = "super::section::default_one")]
+    #[serde(default = "crate::model::section::default_one")]
     pub width_mult: f64,
     /// ResNet depth: 18, 34, 50 or 101.
-    #[serde(default = "super::section::default_depth")]
+    #[serde(default = "crate::model::section::default_depth")]
     pub depth: usize,
     #[serde(default)]
     pub preset: Mask2FormerPreset,
@@ -58,28 +58,11 @@ pub struct Mask2FormerModelConfig {
     pub init: Option<String>,
 }
 
-impl Default for Mask2FormerModelConfig {
-    fn default() -> Self {
-        toml::from_str("").expect("mask2former model defaults")
-    }
-}
-
 impl ModelSection for Mask2FormerModelConfig {
-    fn init(&self) -> Option<&str> {
-        self.init.as_deref()
-    }
-    fn width_mult(&self) -> f64 {
-        self.width_mult
-    }
     /// `crop` is `data.crop` (the ResNet needs 64).
     fn validate(&self, crop: u32) -> Result<()> {
         let m = self;
-        if ![18, 34, 50, 101].contains(&m.depth) {
-            bail!("model.depth = {} must be 18, 34, 50 or 101", m.depth);
-        }
-        if crop < 64 {
-            bail!("data.crop = {crop} must be at least 64 for model.kind = \"mask2former\"");
-        }
+        section::check_resnet(m.depth, crop, "mask2former")?;
         section::check_ranges(&[
             ("queries", m.queries, 1000),
             ("dec_layers", m.dec_layers, 32),
