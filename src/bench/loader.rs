@@ -86,7 +86,7 @@ pub fn bench_loader(cfg: &Config, batches: usize, threads: Option<usize>) -> Res
     synthetic.prepare()?;
     let input = DetectorConfig::from_config(cfg, real.num_classes())?.input_size();
     let fresh = synthetic.fresh && synthetic.count > 0;
-    let loader = Loader::for_run(cfg, real, synthetic, input as u32);
+    let loader = Loader::for_run(cfg, real, synthetic, input as u32)?;
     let prepare = t0.elapsed().as_secs_f64();
 
     let mut pool = rayon::ThreadPoolBuilder::new();

@@ -40,4 +40,4 @@ pub use randomize::Randomize;
 pub use run::{load, locate, parse, Config, BASE_KEY};
 pub use self_training::{SelfTrainingConfig, Teacher, UnlabeledConfig};
 pub use shipped::SHIPPED;
-pub use train::{OptimizerKind, Precision, ScheduleKind, TrainConfig};
+pub use train::{OptimizerKind, Precision, ScheduleKind, TrainConfig, AUGMENTATIONS};

@@ -5,6 +5,21 @@ use serde::{Deserialize, Serialize};
 
 use super::self_training::SelfTrainingConfig;
 
+/// The training augmentations by name (the `[train]` keys that set them; `affine` is
+/// `degrees`, `scale` and `translate`, `crop` is `data.crop`), in the order they run
+/// unless `train.augment_order` says otherwise: ultralytics' order, copy-paste and mosaic
+/// on whole images first, then the warp that crops the mosaic back, the paper's crop, and
+/// flips and colour last. `data::augment::pipeline` builds the list from these names.
+pub const AUGMENTATIONS: [&str; 7] = [
+    "copy_paste",
+    "mosaic",
+    "affine",
+    "crop",
+    "fliplr",
+    "hsv",
+    "flipud",
+];
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum OptimizerKind {
@@ -134,6 +149,10 @@ pub struct TrainConfig {
     /// `copy_paste`, Ghiasi et al. 2021). 0 = off.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub copy_paste: f64,
+    /// The order the augmentations run in: each name of [`AUGMENTATIONS`] once. Unset =
+    /// that list's order (ultralytics'), and left out of resolved configs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub augment_order: Option<Vec<String>>,
     /// Float type of the run: "f32" (default), "bf16" or "f16" (with dynamic loss
     /// scaling). Checkpoints are written in f32 whatever it is. f32 is left out of
     /// resolved configs and checkpoint headers, which then read as before this key.
@@ -291,7 +310,42 @@ impl TrainConfig {
         if t.milestones.windows(2).any(|w| w[0] >= w[1]) {
             bail!("train.milestones = {:?} must be increasing", t.milestones);
         }
+        t.augment_permutation()?;
         Ok(())
+    }
+
+    /// `train.augment_order` as positions in [`AUGMENTATIONS`] (unset: `0, 1, …, 6`); an
+    /// error names an unknown augmentation, one named twice, or one left out.
+    pub fn augment_permutation(&self) -> Result<[usize; AUGMENTATIONS.len()]> {
+        let mut order = std::array::from_fn(|i| i);
+        let Some(names) = &self.augment_order else {
+            return Ok(order);
+        };
+        let all = AUGMENTATIONS.join(", ");
+        let mut seen = [false; AUGMENTATIONS.len()];
+        for (k, name) in names.iter().enumerate() {
+            let Some(i) = AUGMENTATIONS.iter().position(|a| a == name) else {
+                bail!(
+                    "train.augment_order: unknown augmentation {name:?} (the augmentations: {all})"
+                );
+            };
+            if seen[i] {
+                bail!(
+                    "train.augment_order names {name:?} twice: list each augmentation once ({all})"
+                );
+            }
+            seen[i] = true;
+            if k < order.len() {
+                order[k] = i;
+            }
+        }
+        if let Some(i) = seen.iter().position(|s| !s) {
+            bail!(
+                "train.augment_order leaves out {:?}: list every augmentation once ({all}; one that is off does nothing wherever it stands)",
+                AUGMENTATIONS[i]
+            );
+        }
+        Ok(order)
     }
 
     /// `train.real_fraction = f`: a share in [0, 1] that leaves both kinds of image in a
@@ -392,6 +446,39 @@ mod tests {
             assert!(e.contains(needle), "{text}: {e}");
         }
         assert!(toml::from_str::<TrainConfig>("mosaics = 1").is_err());
+    }
+
+    #[test]
+    fn augment_order_is_a_permutation_of_the_names_and_left_out_when_unset() {
+        let t = TrainConfig::default();
+        assert_eq!(t.augment_permutation().unwrap(), [0, 1, 2, 3, 4, 5, 6]);
+        assert!(!toml::to_string(&t).unwrap().contains("augment_order"));
+        let t: TrainConfig = toml::from_str(
+            r#"augment_order = ["hsv", "fliplr", "crop", "affine", "mosaic", "copy_paste", "flipud"]"#,
+        )
+        .unwrap();
+        t.validate().unwrap();
+        assert_eq!(t.augment_permutation().unwrap(), [5, 4, 3, 2, 1, 0, 6]);
+        assert!(toml::to_string(&t).unwrap().contains("augment_order"));
+        for (order, needle) in [
+            (
+                r#"["crop", "flip", "hsv"]"#,
+                r#"train.augment_order: unknown augmentation "flip" (the augmentations: copy_paste, mosaic"#,
+            ),
+            (
+                r#"["crop", "crop", "hsv", "fliplr", "flipud", "affine", "mosaic", "copy_paste"]"#,
+                r#"train.augment_order names "crop" twice"#,
+            ),
+            (
+                r#"["crop", "hsv", "fliplr", "flipud", "affine", "mosaic"]"#,
+                r#"train.augment_order leaves out "copy_paste""#,
+            ),
+            ("[]", r#"leaves out "copy_paste""#),
+        ] {
+            let t: TrainConfig = toml::from_str(&format!("augment_order = {order}")).unwrap();
+            let e = t.validate().unwrap_err().to_string();
+            assert!(e.contains(needle), "{order}: {e}");
+        }
     }
 
     #[test]

@@ -174,10 +174,16 @@ pub struct Loader {
 
 impl Loader {
     /// The loader a run of `cfg` trains with: its augmentations (`train.*`), inputs of
-    /// `input` px and the run's seed.
-    pub fn for_run(cfg: &Config, real: RealSet, synthetic: SyntheticSet, input: u32) -> Loader {
+    /// `input` px and the run's seed; an error when `train.augment_order` is not a
+    /// permutation of the augmentations.
+    pub fn for_run(
+        cfg: &Config,
+        real: RealSet,
+        synthetic: SyntheticSet,
+        input: u32,
+    ) -> Result<Loader> {
         let t = &cfg.train;
-        Loader {
+        Ok(Loader {
             real,
             synthetic,
             aug: AugmentConfig {
@@ -187,12 +193,13 @@ impl Loader {
                 flipud: t.flipud,
                 mosaic: t.mosaic,
                 copy_paste: t.copy_paste,
+                order: t.augment_permutation()?,
                 ..AugmentConfig::basic(cfg.data.crop, t.fliplr, t.hsv)
             },
             input,
             seed: cfg.seed,
             pseudo: None,
-        }
+        })
     }
 
     fn load(&self, it: Item, epoch: usize) -> Result<Sample> {

@@ -87,7 +87,7 @@ pub fn train(cfg: Config, opts: &TrainOptions) -> Result<TrainSummary> {
     if let Some(s) = &selftrain {
         say(s.describe(cfg.train.epochs, cfg.train.batch));
     }
-    let mut loader = Loader::for_run(&cfg, real.clone(), synthetic, input as u32);
+    let mut loader = Loader::for_run(&cfg, real.clone(), synthetic, input as u32)?;
     if st.epoch == 0 {
         super::batch_plots::write_train_batches(&run_dir, &cfg, &loader, &split.train)?;
     }

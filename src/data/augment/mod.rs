@@ -8,7 +8,9 @@
 //! and `translate` as one warp, [`super::affine`]) → [`Crop`] (the paper's random
 //! `crop × crop` window) → [`FlipLr`] (probability `fliplr`) → [`Hsv`] (ultralytics' HSV
 //! gains drawn uniformly in `1 ± hsv[k]`, like `augment_hsv`) → [`FlipUd`] (`flipud`).
-//! Each off at 0 but crop, the horizontal flip and HSV, which are the paper's.
+//! Each off at 0 but crop, the horizontal flip and HSV, which are the paper's. That is the
+//! default order ([`crate::config::AUGMENTATIONS`]); `train.augment_order` runs the same
+//! list in another ([`AugmentConfig::order`]).
 //!
 //! Crop, horizontal flip and HSV draw from the caller's item RNG exactly as before the
 //! other augmentations existed; those draw from a second stream ([`augment_full`]'s
@@ -32,6 +34,7 @@ use super::affine::RandomAffine;
 use super::copy_paste::CopyPaste;
 use super::dataset::Sample;
 use super::mosaic::Mosaic;
+use crate::config::AUGMENTATIONS;
 pub use crop::Crop;
 pub use flip::{flip_horizontal, flip_vertical, FlipLr, FlipUd};
 pub use hsv::{hsv_jitter, hsv_to_rgb, rgb_to_hsv, Hsv};
@@ -55,7 +58,13 @@ pub struct AugmentConfig {
     pub mosaic: f64,
     /// Probability of pasting instances of another item of the epoch.
     pub copy_paste: f64,
+    /// The order of the list: positions in [`AUGMENTATIONS`] (`train.augment_order`,
+    /// validated by the config to be a permutation; [`DEFAULT_ORDER`] unless set).
+    pub order: [usize; AUGMENTATIONS.len()],
 }
+
+/// The list in [`AUGMENTATIONS`]' own order.
+pub const DEFAULT_ORDER: [usize; AUGMENTATIONS.len()] = [0, 1, 2, 3, 4, 5, 6];
 
 impl AugmentConfig {
     /// Crop, flip and colour jitter only (every other augmentation off).
@@ -70,6 +79,7 @@ impl AugmentConfig {
             flipud: 0.0,
             mosaic: 0.0,
             copy_paste: 0.0,
+            order: DEFAULT_ORDER,
         }
     }
 
@@ -139,11 +149,12 @@ impl Compose {
     }
 }
 
-/// The augmentation list of `cfg`: every augmentation in the pipeline's order (one that
-/// is off does nothing and draws nothing, but crop, the horizontal flip and HSV, whose
-/// draws the main stream always had).
+/// The augmentation list of `cfg`: every augmentation, in `cfg.order` (one that is off
+/// does nothing and draws nothing, but crop, the horizontal flip and HSV, whose draws the
+/// main stream always had).
 pub fn pipeline(cfg: &AugmentConfig) -> Compose {
-    Compose(vec![
+    // In the order of `AUGMENTATIONS`, whose names are theirs (a test checks it).
+    let steps: [Box<dyn Augment>; AUGMENTATIONS.len()] = [
         Box::new(CopyPaste),
         Box::new(Mosaic),
         Box::new(RandomAffine {
@@ -159,7 +170,18 @@ pub fn pipeline(cfg: &AugmentConfig) -> Compose {
         Box::new(FlipLr { p: cfg.fliplr }),
         Box::new(Hsv { gains: cfg.hsv }),
         Box::new(FlipUd { p: cfg.flipud }),
-    ])
+    ];
+    let mut steps = steps.map(Some);
+    Compose(
+        cfg.order
+            .iter()
+            .map(|&i| {
+                steps[i]
+                    .take()
+                    .expect("AugmentConfig::order is a permutation (the config checks it)")
+            })
+            .collect(),
+    )
 }
 
 /// The whole pipeline: copy-paste from `partners.copy_paste`, a mosaic with
@@ -186,7 +208,10 @@ pub fn augment_full<R: Rng, E: Rng>(
 pub fn augment<R: Rng>(s: &Sample, cfg: &AugmentConfig, rng: &mut R) -> Sample {
     // Nothing of the basic list draws from the second stream: a fixed one stands in.
     let mut unused = ChaCha8Rng::seed_from_u64(0);
-    let basic = AugmentConfig::basic(cfg.crop, cfg.fliplr, cfg.hsv);
+    let basic = AugmentConfig {
+        order: cfg.order,
+        ..AugmentConfig::basic(cfg.crop, cfg.fliplr, cfg.hsv)
+    };
     augment_full(s, &PartnerSamples::default(), &basic, &mut unused, rng)
 }
 
@@ -527,5 +552,34 @@ mod tests {
         let want = augment(&a, &basic, &mut ChaCha8Rng::seed_from_u64(4));
         assert_eq!((got.image, got.instances), (want.image, want.instances));
         assert_eq!(extra, before);
+    }
+
+    #[test]
+    fn the_list_runs_in_the_configured_order_under_the_configs_names() {
+        let cfg = AugmentConfig::basic(24, 0.5, [0.015, 0.7, 0.4]);
+        // HSV and the flip before the crop: the main stream's draws go to other steps.
+        let reordered = AugmentConfig {
+            order: [5, 4, 3, 0, 1, 2, 6],
+            ..cfg
+        };
+        assert_eq!(
+            pipeline(&reordered).names(),
+            [
+                "hsv",
+                "fliplr",
+                "crop",
+                "copy_paste",
+                "mosaic",
+                "affine",
+                "flipud"
+            ]
+        );
+        let a = painted(32, 5, 30, &[(2, 2, 20, 12), (10, 14, 30, 30)]);
+        let run = |c: &AugmentConfig| augment(&a, c, &mut ChaCha8Rng::seed_from_u64(7));
+        let (x, y) = (run(&reordered), run(&reordered));
+        assert_eq!(x.image, y.image);
+        assert_eq!(x.instances, y.instances);
+        assert_eq!(x.image.dimensions(), (24, 24));
+        assert_ne!(x.image, run(&cfg).image);
     }
 }

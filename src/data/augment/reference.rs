@@ -252,21 +252,16 @@ mod tests {
         }
     }
 
-    /// Today's order, which the configs rely on for their draws.
+    /// Today's order, which the configs rely on for their draws, under the names
+    /// `train.augment_order` takes.
     #[test]
     fn the_default_list_is_ultralytics_order() {
         let cfg = AugmentConfig::basic(32, 0.5, [0.0; 3]);
+        let names = pipeline(&cfg).names();
         assert_eq!(
-            pipeline(&cfg).names(),
-            [
-                "copy_paste",
-                "mosaic",
-                "affine",
-                "crop",
-                "fliplr",
-                "hsv",
-                "flipud"
-            ]
+            names.join(" → "),
+            "copy_paste → mosaic → affine → crop → fliplr → hsv → flipud"
         );
+        assert_eq!(names, crate::config::AUGMENTATIONS);
     }
 }
