@@ -7,14 +7,13 @@
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
-use chicktrain::eval::coco_eval::{evaluate, IouType};
 use chicktrain::model::mask2former::{CriterionConfig, Mask2Former, Mask2FormerConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 mod common;
 
-use common::overfit::{ellipses, to_coco, BATCH, SIZE};
+use common::overfit::{assert_overfits, assert_terms_fell, ellipses, BATCH, SIZE};
 
 fn tiny_config() -> Mask2FormerConfig {
     Mask2FormerConfig {
@@ -70,22 +69,14 @@ const STEPS: usize = 120;
 fn tiny_model_overfits_one_batch_on_flex() {
     let t = std::time::Instant::now();
     let (log, model) = train(Device::flex(), STEPS, 5);
-    let mean = |s: &[[f32; 4]], k: usize| s.iter().map(|v| v[k]).sum::<f32>() / s.len() as f32;
-    let (first, last) = (&log[..3], &log[log.len() - 3..]);
     eprintln!(
-        "first {first:?}\nlast {last:?}\n{:.1} s",
+        "first {:?}\nlast {:?}\n{:.1} s",
+        &log[..3],
+        &log[log.len() - 3..],
         t.elapsed().as_secs_f32()
     );
-    let (t0, t1) = (mean(first, 3), mean(last, 3));
-    assert!(t1 < 0.5 * t0, "total loss fell only from {t0} to {t1}");
-    for (k, name) in ["cls", "mask", "dice"].iter().enumerate() {
-        assert!(
-            mean(last, k) < 0.7 * mean(first, k),
-            "{name} fell only from {} to {}",
-            mean(first, k),
-            mean(last, k)
-        );
-    }
+    assert_terms_fell(&log, &[(3, "total loss")], 0.5);
+    assert_terms_fell(&log, &[(0, "cls"), (1, "mask"), (2, "dice")], 0.7);
     let eval = model.valid();
     let (px, targets) = ellipses(11);
     let x = Tensor::<4>::from_data(TensorData::new(px, [BATCH, 3, SIZE, SIZE]), &Device::flex());
@@ -95,19 +86,7 @@ fn tiny_model_overfits_one_batch_on_flex() {
         assert!(d.score > 0.0 && d.score <= 1.0 && d.class == 0);
         assert!(d.bbox[2] > 0.0 && d.bbox[3] > 0.0 && d.bbox[0] + d.bbox[2] <= SIZE as f32);
     }
-    let (gt, dt) = to_coco(&targets, &dets);
-    let segm = evaluate(&gt, &dt, IouType::Segm).unwrap();
-    eprintln!(
-        "{} detections; segm AP50 {:.3}, AP {:.3}",
-        dt.len(),
-        segm.stats[1],
-        segm.stats[0]
-    );
-    assert!(
-        segm.stats[1] >= 0.9,
-        "segm AP50 {} on the training batch",
-        segm.stats[1]
-    );
+    assert_overfits(&targets, &dets);
 }
 
 #[test]

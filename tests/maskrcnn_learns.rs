@@ -14,7 +14,7 @@ use rand_chacha::ChaCha8Rng;
 
 mod common;
 
-use common::overfit::{ellipses, to_coco, BATCH, SIZE};
+use common::overfit::{assert_overfits, assert_terms_fell, ellipses, to_coco, BATCH, SIZE};
 
 fn tiny_config() -> MaskRcnnConfig {
     common::tiny::tiny_maskrcnn(
@@ -56,24 +56,10 @@ fn train(dev: Device, steps: usize, calib: usize) -> (Vec<[f32; 6]>, MaskRcnn) {
 #[test]
 fn tiny_model_learns_on_flex() {
     let (log, model) = train(Device::flex(), 60, 10);
-    let mean = |s: &[[f32; 6]], k: usize| s.iter().map(|v| v[k]).sum::<f32>() / s.len() as f32;
-    let (first, last) = (&log[..3], &log[log.len() - 3..]);
-    eprintln!("first {:?}\nlast {:?}", first, last);
-    let (t0, t1) = (mean(first, 5), mean(last, 5));
-    assert!(t1 < 0.5 * t0, "total loss fell only from {t0} to {t1}");
+    eprintln!("first {:?}\nlast {:?}", &log[..3], &log[log.len() - 3..]);
+    assert_terms_fell(&log, &[(5, "total loss")], 0.5);
     // Every head learns, not only one term.
-    for (k, name) in ["rpn_cls", "roi_cls", "mask"]
-        .iter()
-        .enumerate()
-        .map(|(i, n)| ([0, 2, 4][i], n))
-    {
-        assert!(
-            mean(last, k) < 0.7 * mean(first, k),
-            "{name} fell only from {} to {}",
-            mean(first, k),
-            mean(last, k)
-        );
-    }
+    assert_terms_fell(&log, &[(0, "rpn_cls"), (2, "roi_cls"), (4, "mask")], 0.7);
 
     let eval = model.valid();
     let (px, _) = ellipses(11);
@@ -91,21 +77,10 @@ fn tiny_model_learns_on_flex() {
         );
     }
     let (_, targets) = ellipses(11);
+    assert_overfits(&targets, &dets);
     let (gt, dt) = to_coco(&targets, &dets);
-    let segm = evaluate(&gt, &dt, IouType::Segm).unwrap();
     let bbox = evaluate(&gt, &dt, IouType::Bbox).unwrap();
-    eprintln!(
-        "{} detections; segm AP50 {:.3}, AP {:.3}; bbox AP50 {:.3}",
-        dt.len(),
-        segm.stats[1],
-        segm.stats[0],
-        bbox.stats[1]
-    );
-    assert!(
-        segm.stats[1] >= 0.9,
-        "segm AP50 {} on the training batch",
-        segm.stats[1]
-    );
+    eprintln!("bbox AP50 {:.3}", bbox.stats[1]);
 }
 
 #[test]

@@ -11,20 +11,12 @@ use chicktrain::model::maskrcnn::roi_align::{roi_align, roi_align_host};
 use chicktrain::util::tensor::to_host;
 use serde_json::Value;
 
-fn load() -> Value {
-    let path = format!(
-        "{}/tests/fixtures/maskrcnn/roi_align.json",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    serde_json::from_str(&std::fs::read_to_string(&path).expect(&path)).unwrap()
-}
+mod common;
 
-fn floats(v: &Value) -> Vec<f32> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap() as f32)
-        .collect()
+use common::json::floats;
+
+fn load() -> Value {
+    common::json::fixture("maskrcnn/roi_align.json")
 }
 
 fn dims<const D: usize>(v: &Value) -> [usize; D] {

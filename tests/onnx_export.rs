@@ -10,7 +10,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use chicktrain::annotations::rle::{rle_iou, Rle};
-use common::{assert_clean_error, assert_success, run, smoke_args, tmp};
+use common::{assert_clean_error, assert_success, export, run, smoke_args, tmp};
 use serde_json::Value;
 
 fn results(dir: &Path) -> Vec<Value> {
@@ -87,30 +87,18 @@ fn export_then_predict_with_tract_matches_checkpoint() {
     let best_s = best.to_str().unwrap();
 
     // Default output path: best.onnx beside best.bpk; the reference file beside it.
-    let out = run(&[
-        "export",
-        "--checkpoint",
-        best_s,
-        "--format",
-        "onnx",
-        "--reference",
-    ]);
+    let out = export(best_s, "onnx", &["--reference"]);
     assert_success(&out);
     let onnx = run_dir.join("best.onnx");
     assert!(onnx.is_file());
     let reference = run_dir.join("best.reference.safetensors");
     assert!(reference.is_file());
     let dynamic = d.join("dyn.onnx");
-    assert_success(&run(&[
-        "export",
-        "--checkpoint",
+    assert_success(&export(
         best_s,
-        "--format",
         "onnx",
-        "--dynamic",
-        "--out",
-        dynamic.to_str().unwrap(),
-    ]));
+        &["--dynamic", "--out", dynamic.to_str().unwrap()],
+    ));
 
     let input = render_inputs(&d);
     let pred = |args: &[&str], conf: &str, out: &str| predict(&input, args, conf, &d.join(out));
@@ -167,34 +155,15 @@ fn export_errors_are_clean() {
     ]);
     assert_clean_error(&out, &["junk.onnx"]);
     let missing = d.join("none.bpk");
-    let out = run(&[
-        "export",
-        "--checkpoint",
-        missing.to_str().unwrap(),
-        "--format",
-        "onnx",
-    ]);
+    let out = export(missing.to_str().unwrap(), "onnx", &[]);
     assert_clean_error(&out, &["none.bpk"]);
     assert!(!d.join("none.onnx").exists());
-    let out = run(&[
-        "export",
-        "--checkpoint",
-        missing.to_str().unwrap(),
-        "--format",
-        "safetensors",
-    ]);
+    let out = export(missing.to_str().unwrap(), "safetensors", &[]);
     assert_clean_error(&out, &["none.bpk"]);
     assert!(!d.join("none.safetensors").exists());
 
     // ONNX-only options with safetensors: a clear error, no file.
-    let out = run(&[
-        "export",
-        "--checkpoint",
-        missing.to_str().unwrap(),
-        "--format",
-        "safetensors",
-        "--dynamic",
-    ]);
+    let out = export(missing.to_str().unwrap(), "safetensors", &["--dynamic"]);
     assert_clean_error(
         &out,
         &["--dynamic, --batch and --reference are ONNX options"],
@@ -216,14 +185,7 @@ fn maskrcnn_exports_three_graphs_that_tract_runs_like_chicktrain() {
     a[1] = "maskrcnn_r50_syn250.toml".into();
     assert_success(&run(&a));
     let best = mr.join("best.bpk");
-    let out = run(&[
-        "export",
-        "--checkpoint",
-        best.to_str().unwrap(),
-        "--format",
-        "onnx",
-        "--reference",
-    ]);
+    let out = export(best.to_str().unwrap(), "onnx", &["--reference"]);
     assert_success(&out);
     let reference: std::collections::HashMap<String, (Vec<usize>, Vec<f32>)> =
         read_file(&mr.join("best.reference.safetensors"), &[])
@@ -266,13 +228,7 @@ fn maskrcnn_exports_three_graphs_that_tract_runs_like_chicktrain() {
     assert_eq!(outputs, 18);
 
     let st = mr.join("best.safetensors");
-    assert_success(&run(&[
-        "export",
-        "--checkpoint",
-        best.to_str().unwrap(),
-        "--format",
-        "safetensors",
-    ]));
+    assert_success(&export(best.to_str().unwrap(), "safetensors", &[]));
     let keys: Vec<String> = read_file(&st, &[])
         .unwrap()
         .into_iter()

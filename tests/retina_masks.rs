@@ -20,20 +20,12 @@ use chicktrain::model::detection::Detection;
 use chicktrain::model::instance_mask::{paste_roi_mask, prototype_mask, MaskSource, Prototypes};
 use serde_json::Value;
 
-fn load() -> Value {
-    let path = format!(
-        "{}/tests/fixtures/masks/retina.json",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    serde_json::from_str(&std::fs::read_to_string(&path).expect(&path)).unwrap()
-}
+mod common;
 
-fn floats(v: &Value) -> Vec<f32> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap() as f32)
-        .collect()
+use common::json::floats;
+
+fn load() -> Value {
+    common::json::fixture("masks/retina.json")
 }
 
 fn ints(v: &Value) -> Vec<u32> {

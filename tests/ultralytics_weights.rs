@@ -374,13 +374,7 @@ fn export_command_writes_the_ultralytics_state_dict() {
         &ckpt,
     );
 
-    let out = common::run(&[
-        "export",
-        "--checkpoint",
-        ckpt.to_str().unwrap(),
-        "--format",
-        "safetensors",
-    ]);
+    let out = common::export(ckpt.to_str().unwrap(), "safetensors", &[]);
     common::assert_success(&out);
     let st = dir.join("best.safetensors");
     assert!(String::from_utf8_lossy(&out.stdout).contains("best.safetensors"));
@@ -413,13 +407,7 @@ fn export_command_writes_the_ultralytics_state_dict() {
         DetectorConfig::Maskrcnn(mr),
         &mr_ckpt,
     );
-    let out = common::run(&[
-        "export",
-        "--checkpoint",
-        mr_ckpt.to_str().unwrap(),
-        "--format",
-        "safetensors",
-    ]);
+    let out = common::export(mr_ckpt.to_str().unwrap(), "safetensors", &[]);
     // Mask R-CNN exports under torchvision's names (tests/torchvision_import.rs checks
     // the contents); here only that the shared command takes the other family.
     assert!(
@@ -428,15 +416,11 @@ fn export_command_writes_the_ultralytics_state_dict() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(dir.join("mrcnn.safetensors").exists());
-    let out = common::run(&[
-        "export",
-        "--checkpoint",
+    let out = common::export(
         file.to_str().unwrap(),
-        "--format",
         "safetensors",
-        "--out",
-        dir.join("x.safetensors").to_str().unwrap(),
-    ]);
+        &["--out", dir.join("x.safetensors").to_str().unwrap()],
+    );
     common::assert_clean_error(&out, &["tiny_seg.pt is not a chicktrain checkpoint"]);
     assert!(!dir.join("x.safetensors").exists());
     std::fs::remove_dir_all(dir).unwrap();

@@ -31,6 +31,12 @@ fn write(path: &Path, text: &str) {
     std::fs::write(path, text).unwrap();
 }
 
+/// The error of loading `ds/data.yaml` under `d` written as `yaml`.
+fn load_err(d: &Path, yaml: &str) -> String {
+    write(&d.join("ds/data.yaml"), yaml);
+    format!("{:#}", yolo::load(&d.join("ds/data.yaml")).unwrap_err())
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -277,34 +283,21 @@ fn missing_keys_folders_and_overlaps_are_clear_errors() {
             vec!["invalid YAML at line"],
         ),
     ] {
-        write(&d.join("ds/data.yaml"), yaml);
-        let e = format!("{:#}", yolo::load(&d.join("ds/data.yaml")).unwrap_err());
+        let e = load_err(&d, yaml);
         for n in needles {
             assert!(e.contains(n), "{yaml:?}: {e}");
         }
     }
     // An empty folder, a list naming a missing image.
     std::fs::create_dir_all(d.join("ds/images/empty")).unwrap();
-    write(
-        &d.join("ds/data.yaml"),
-        "train: images/empty\nval: images/v\nnames: [c]\n",
-    );
-    let e = format!("{:#}", yolo::load(&d.join("ds/data.yaml")).unwrap_err());
+    let e = load_err(&d, "train: images/empty\nval: images/v\nnames: [c]\n");
     assert!(e.contains("no images") && e.contains("images/empty"), "{e}");
     write(&d.join("ds/l.txt"), "./images/t/a.png\n./images/t/zz.png\n");
-    write(
-        &d.join("ds/data.yaml"),
-        "train: l.txt\nval: images/v\nnames: [c]\n",
-    );
-    let e = format!("{:#}", yolo::load(&d.join("ds/data.yaml")).unwrap_err());
+    let e = load_err(&d, "train: l.txt\nval: images/v\nnames: [c]\n");
     assert!(e.contains("l.txt:2") && e.contains("zz.png"), "{e}");
     // A corrupt image: named.
     write(&d.join("ds/images/v/b.png"), "not a png");
-    write(
-        &d.join("ds/data.yaml"),
-        "train: images/t\nval: images/v\nnames: [c]\n",
-    );
-    let e = format!("{:#}", yolo::load(&d.join("ds/data.yaml")).unwrap_err());
+    let e = load_err(&d, "train: images/t\nval: images/v\nnames: [c]\n");
     assert!(e.contains("b.png"), "{e}");
     // The config: kind = "yolo" without yaml, a yaml that is not there.
     let out = run(&[

@@ -12,23 +12,12 @@ use chicktrain::model::yolo::loss::{ciou_tensor, yolo_loss, LossWeights};
 use chicktrain::model::yolo::{AnchorGrid, YoloOutput};
 use serde_json::Value;
 
+mod common;
+
+use common::json::floats;
+
 fn load(name: &str) -> Value {
-    let path = format!("{}/tests/fixtures/yolo/{name}", env!("CARGO_MANIFEST_DIR"));
-    serde_json::from_str(&std::fs::read_to_string(&path).expect(&path)).unwrap()
-}
-
-fn flat(v: &Value, out: &mut Vec<f32>) {
-    match v {
-        Value::Array(a) => a.iter().for_each(|x| flat(x, out)),
-        Value::Number(n) => out.push(n.as_f64().unwrap() as f32),
-        other => panic!("unexpected {other}"),
-    }
-}
-
-fn floats(v: &Value) -> Vec<f32> {
-    let mut out = Vec::new();
-    flat(v, &mut out);
-    out
+    common::json::fixture(&format!("yolo/{name}"))
 }
 
 fn box4(v: &Value) -> [f32; 4] {

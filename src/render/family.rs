@@ -192,16 +192,6 @@ impl Family {
 mod tests {
     use super::*;
 
-    fn volume(m: &crate::render::mesh::Mesh) -> f32 {
-        m.indices
-            .chunks(3)
-            .map(|t| {
-                let [a, b, c] = [t[0], t[1], t[2]].map(|i| m.positions[i as usize]);
-                a.dot(b.cross(c)) / 6.0
-            })
-            .sum()
-    }
-
     #[test]
     fn families_are_valid_and_differ_in_geometry() {
         let shares: f64 = Family::ALL.iter().map(|f| f.share()).sum();
@@ -232,7 +222,7 @@ mod tests {
                 .iter()
                 .flatten()
                 .all(|&j| (j as usize) < s.joints.len()));
-            let v = volume(m);
+            let v = m.volume();
             assert!(v > 0.0008 && v < 0.005, "{f:?}: volume {v}");
             let (lo, hi) = m.bounds();
             let e = hi - lo;

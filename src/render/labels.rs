@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use super::noise::{fceil, ffloor};
 
 use super::camera::Camera;
+use super::screen::corners;
 use super::trace::Geometry;
 
 /// Thresholds for dropping / ignoring instances.
@@ -79,11 +80,7 @@ pub fn amodal_masks(geo: &Geometry, cam: &Camera, n_instances: usize) -> Vec<Vec
         .map(|&(lo, hi)| {
             let mut m = vec![false; w * h];
             for tri in geo.triangles.get(lo..hi).unwrap_or(&[]) {
-                let (Some(a), Some(b), Some(c)) = (
-                    proj[tri[0] as usize],
-                    proj[tri[1] as usize],
-                    proj[tri[2] as usize],
-                ) else {
+                let Some([a, b, c]) = corners(&proj, tri) else {
                     continue;
                 };
                 let area = (b - a).perp_dot(c - a);

@@ -43,6 +43,18 @@ impl Mesh {
         )
     }
 
+    /// The enclosed volume (m³) of a closed mesh with outward-wound triangles: the sum of
+    /// the signed tetrahedra each triangle spans with the origin.
+    pub fn volume(&self) -> f32 {
+        self.indices
+            .chunks(3)
+            .map(|t| {
+                let [a, b, c] = [t[0], t[1], t[2]].map(|i| self.positions[i as usize]);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
     /// Smooth vertex normals from the triangles (area weighted).
     pub fn compute_normals(positions: &[Vec3], indices: &[u32]) -> Vec<Vec3> {
         let mut n = vec![Vec3::ZERO; positions.len()];

@@ -494,16 +494,6 @@ mod tests {
         edges.values().filter(|&&c| c != 2).count()
     }
 
-    fn volume(m: &Mesh) -> f32 {
-        m.indices
-            .chunks(3)
-            .map(|t| {
-                let [a, b, c] = [t[0], t[1], t[2]].map(|i| m.positions[i as usize]);
-                a.dot(b.cross(c)) / 6.0
-            })
-            .sum()
-    }
-
     #[test]
     fn missing_parts_remove_geometry_and_are_capped() {
         let mesh = carcass::generate(0.006);
@@ -511,7 +501,7 @@ mod tests {
         let (same, _) = Parts::whole().apply(&mesh, &red);
         assert_eq!(same, mesh);
         let bad0 = closedness(&mesh);
-        let v0 = volume(&mesh);
+        let v0 = mesh.volume();
         let skin = mesh.skin.as_ref().unwrap();
         let max_y = |m: &Mesh| m.positions.iter().map(|p| p.y).fold(f32::MIN, f32::max);
         for (parts, what) in [
@@ -541,7 +531,7 @@ mod tests {
                 "{what}: {} open edges",
                 closedness(&m)
             );
-            let v = volume(&m);
+            let v = m.volume();
             assert!(v < v0 * 0.995 && v > v0 * 0.6, "{what}: volume {v} vs {v0}");
             // Cut surfaces exist and carry the cut tissue code.
             assert!(r.iter().any(|&x| x >= CUT_MEAT), "{what}");

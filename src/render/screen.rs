@@ -30,6 +30,16 @@ pub(super) struct PixelOut {
     pub(super) id: u16,
 }
 
+/// The projected corners of triangle `tri`; `None` when one of them did not project
+/// (behind the camera).
+pub fn corners<T: Copy>(proj: &[Option<T>], tri: &[u32; 3]) -> Option<[T; 3]> {
+    Some([
+        proj[tri[0] as usize]?,
+        proj[tri[1] as usize]?,
+        proj[tri[2] as usize]?,
+    ])
+}
+
 /// Z-buffer rasterisation of all triangles: per pixel the nearest triangle whose
 /// projection covers the pixel centre (u32::MAX = none). Rows are split into bands
 /// rasterised in parallel; depth is 1/z interpolated linearly in screen space.
@@ -48,11 +58,7 @@ pub fn raster_primary(positions: &[Vec3], triangles: &[[u32; 3]], cam: &Camera) 
     // the same way whatever the band layout).
     let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nbands];
     for (t, tri) in triangles.iter().enumerate() {
-        let (Some(a), Some(b), Some(c)) = (
-            proj[tri[0] as usize],
-            proj[tri[1] as usize],
-            proj[tri[2] as usize],
-        ) else {
+        let Some([a, b, c]) = corners(&proj, tri) else {
             continue;
         };
         let y0 = fceil(a.1.min(b.1).min(c.1) - 0.5).max(0.0);
@@ -79,11 +85,7 @@ pub fn raster_primary(positions: &[Vec3], triangles: &[[u32; 3]], cam: &Camera) 
             for &t in bin {
                 let t = t as usize;
                 let tri = &triangles[t];
-                let (Some(a), Some(b), Some(c)) = (
-                    proj[tri[0] as usize],
-                    proj[tri[1] as usize],
-                    proj[tri[2] as usize],
-                ) else {
+                let Some([a, b, c]) = corners(&proj, tri) else {
                     continue;
                 };
                 let ymin = a.1.min(b.1).min(c.1);

@@ -358,16 +358,11 @@ impl<'a> Unpickler<'a> {
                     self.stack.push(v);
                     self.nest_top(d)?;
                 }
-                0x81 => {
-                    let args = self.pop()?;
-                    let cls = self.pop()?;
-                    let d = self.depth_of(&args);
-                    self.stack
-                        .push(new_object(&cls, args.elements().unwrap_or_default()));
-                    self.nest_top(d)?;
-                }
-                0x92 => {
-                    let _kwargs = self.pop()?;
+                // NEWOBJ, and NEWOBJ_EX whose keyword arguments on top are dropped.
+                0x81 | 0x92 => {
+                    if op == 0x92 {
+                        self.pop()?;
+                    }
                     let args = self.pop()?;
                     let cls = self.pop()?;
                     let d = self.depth_of(&args);

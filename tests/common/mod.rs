@@ -1,8 +1,10 @@
 //! Helpers shared by the test crates: running the binary (here), the `--smoke` scenario
 //! of the `train_*` tests ([`smoke`]), the one-batch scene of the `*_learns` tests
-//! ([`overfit`]) and the tiny Mask R-CNN of the model tests ([`tiny`]).
+//! ([`overfit`]), the tiny Mask R-CNN of the model tests ([`tiny`]) and the JSON fixtures
+//! ([`json`]).
 #![allow(dead_code)] // each test crate uses its own subset
 
+pub mod json;
 pub mod overfit;
 pub mod smoke;
 pub mod tiny;
@@ -24,6 +26,13 @@ pub fn tmp(name: &str) -> PathBuf {
 
 pub fn run<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
     bin().args(args).output().unwrap()
+}
+
+/// `chicktrain export --checkpoint CHECKPOINT --format FORMAT` and `extra` flags.
+pub fn export(checkpoint: &str, format: &str, extra: &[&str]) -> Output {
+    let mut args = vec!["export", "--checkpoint", checkpoint, "--format", format];
+    args.extend_from_slice(extra);
+    run(&args)
 }
 
 /// Fails unless the command exited 2 with an error naming every needle, and no panic.

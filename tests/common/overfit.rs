@@ -1,6 +1,8 @@
 //! The one-batch overfitting scene of the `*_learns` model tests: `BATCH` 64 px images of
-//! filled ellipses with their masks, and the ground truth and detections in COCO form for
-//! the shared evaluator (image ids from 1, category 1).
+//! filled ellipses with their masks, the ground truth and detections in COCO form for
+//! the shared evaluator (image ids from 1, category 1), and the two checks every
+//! `*_learns` test makes: the logged loss terms fell ([`assert_terms_fell`]) and the
+//! eval-mode model overfits the batch ([`assert_overfits`]).
 
 use chicktrain::annotations::coco::{
     CocoAnnotation, CocoCategory, CocoDataset, CocoImage, Detection as CocoDetection, Segmentation,
@@ -8,6 +10,7 @@ use chicktrain::annotations::coco::{
 use chicktrain::annotations::mask::Mask;
 use chicktrain::annotations::rle::Rle;
 use chicktrain::annotations::targets::ImageTargets;
+use chicktrain::eval::coco_eval::{evaluate, IouType};
 use chicktrain::model::detection::Detection;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -107,4 +110,33 @@ pub fn to_coco(
         }
     }
     (gt, dt)
+}
+
+/// Fails unless each `(k, name)` term of the logged steps fell: its mean over the last
+/// three steps below `factor` times its mean over the first three.
+pub fn assert_terms_fell<const N: usize>(log: &[[f32; N]], terms: &[(usize, &str)], factor: f32) {
+    let mean = |s: &[[f32; N]], k: usize| s.iter().map(|v| v[k]).sum::<f32>() / s.len() as f32;
+    let (first, last) = (&log[..3], &log[log.len() - 3..]);
+    for &(k, name) in terms {
+        let (a, b) = (mean(first, k), mean(last, k));
+        assert!(b < factor * a, "{name} fell only from {a} to {b}");
+    }
+}
+
+/// Fails unless `dets` reach segm AP50 0.9 on the training batch `targets` (the
+/// overfitting criterion of the `*_learns` tests).
+pub fn assert_overfits(targets: &[ImageTargets], dets: &[Vec<Detection>]) {
+    let (gt, dt) = to_coco(targets, dets);
+    let segm = evaluate(&gt, &dt, IouType::Segm).unwrap();
+    eprintln!(
+        "{} detections; segm AP50 {:.3}, AP {:.3}",
+        dt.len(),
+        segm.stats[1],
+        segm.stats[0]
+    );
+    assert!(
+        segm.stats[1] >= 0.9,
+        "segm AP50 {} on the training batch",
+        segm.stats[1]
+    );
 }
