@@ -356,17 +356,7 @@ fn broken_images_meshes_and_checkpoints_exit_2_naming_the_file() {
     let render = |mesh: &str, what: &'static str, needles: &[&str]| {
         case(
             what,
-            &[
-                "render",
-                "--count",
-                "1",
-                "--size",
-                "64",
-                "--carcass",
-                &s(&d.join(mesh)),
-                "--out",
-                &s(&d.join("r")),
-            ],
+            &common::render_one(&s(&d.join(mesh)), &s(&d.join("r"))),
             needles,
         )
     };

@@ -285,17 +285,7 @@ fn render_writes_a_loadable_deterministic_dataset() {
     ]);
     assert_clean_error(&bad, &["blender"]);
     let glb = write(&d, "broken.glb", "glTF not really");
-    let bad = run(&[
-        "render",
-        "--count",
-        "1",
-        "--size",
-        "64",
-        "--carcass",
-        &glb,
-        "--out",
-        d.join("c").to_str().unwrap(),
-    ]);
+    let bad = run(&common::render_one(&glb, d.join("c").to_str().unwrap()));
     assert_clean_error(&bad, &["broken.glb"]);
     std::fs::remove_dir_all(&d).unwrap();
 }

@@ -36,12 +36,7 @@ fn all_cases_match_pycocotools_bit_for_bit() {
         let gt = CocoDataset::load(&fixtures().join(format!("cases/{name}_gt.json"))).unwrap();
         let dt = load_results(&fixtures().join(format!("cases/{name}_dt.json"))).unwrap();
         for (key, iou_type) in [("bbox", IouType::Bbox), ("segm", IouType::Segm)] {
-            let want: Vec<f64> = want[key]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_f64().unwrap())
-                .collect();
+            let want: Vec<f64> = f64s(&want[key]);
             let got = evaluate(&gt, &dt, iou_type).unwrap().stats;
             for (i, (g, w)) in got.iter().zip(&want).enumerate() {
                 assert!(
@@ -56,6 +51,23 @@ fn all_cases_match_pycocotools_bit_for_bit() {
     assert_eq!(compared, cases.len() * 2);
 }
 
+/// `(h, w)` of a fixture entry.
+fn size(v: &Value) -> (u32, u32) {
+    (
+        v["h"].as_u64().unwrap() as u32,
+        v["w"].as_u64().unwrap() as u32,
+    )
+}
+
+/// A JSON array of numbers, exactly as f64.
+fn f64s(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
 fn counts_rle(s: &str, h: u32, w: u32) -> Rle {
     Rle::from_compressed(s, h, w).unwrap()
 }
@@ -64,10 +76,7 @@ fn counts_rle(s: &str, h: u32, w: u32) -> Rle {
 fn rle_encode_area_bbox_are_byte_identical() {
     let fx = read(fixtures().join("rle.json"));
     for m in fx["masks"].as_array().unwrap() {
-        let (h, w) = (
-            m["h"].as_u64().unwrap() as u32,
-            m["w"].as_u64().unwrap() as u32,
-        );
+        let (h, w) = size(&m);
         let data: Vec<u8> = m["rows"]
             .as_array()
             .unwrap()
@@ -84,12 +93,7 @@ fn rle_encode_area_bbox_are_byte_identical() {
         let rle = Rle::encode(&mask);
         assert_eq!(rle.to_compressed(), m["counts"].as_str().unwrap());
         assert_eq!(rle.area(), m["area"].as_u64().unwrap());
-        let bb: Vec<f64> = m["bbox"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let bb: Vec<f64> = f64s(&m["bbox"]);
         assert_eq!(rle.bbox().to_vec(), bb);
         assert_eq!(
             counts_rle(m["counts"].as_str().unwrap(), h, w).decode(),
@@ -102,16 +106,8 @@ fn rle_encode_area_bbox_are_byte_identical() {
 fn polygons_rasterise_like_rle_fr_poly() {
     let fx = read(fixtures().join("rle.json"));
     for p in fx["polygons"].as_array().unwrap() {
-        let (h, w) = (
-            p["h"].as_u64().unwrap() as u32,
-            p["w"].as_u64().unwrap() as u32,
-        );
-        let poly: Vec<f64> = p["poly"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let (h, w) = size(&p);
+        let poly: Vec<f64> = f64s(&p["poly"]);
         let rle = rle_from_polygon(&poly, h, w);
         assert_eq!(
             rle.to_compressed(),
@@ -126,10 +122,7 @@ fn polygons_rasterise_like_rle_fr_poly() {
 fn merges_and_ious_match() {
     let fx = read(fixtures().join("rle.json"));
     for m in fx["merges"].as_array().unwrap() {
-        let (h, w) = (
-            m["h"].as_u64().unwrap() as u32,
-            m["w"].as_u64().unwrap() as u32,
-        );
+        let (h, w) = size(&m);
         let rles: Vec<Rle> = m["inputs"]
             .as_array()
             .unwrap()
@@ -146,10 +139,7 @@ fn merges_and_ious_match() {
         );
     }
     for c in fx["ious"].as_array().unwrap() {
-        let (h, w) = (
-            c["h"].as_u64().unwrap() as u32,
-            c["w"].as_u64().unwrap() as u32,
-        );
+        let (h, w) = size(&c);
         let d = counts_rle(c["dt"].as_str().unwrap(), h, w);
         let g = counts_rle(c["gt"].as_str().unwrap(), h, w);
         let iou = rle_iou(&d, &d.bbox(), &g, &g.bbox(), c["crowd"].as_bool().unwrap());

@@ -43,6 +43,11 @@ fn tensors(ck: &Path, section: &str) -> HashMap<String, Vec<f32>> {
         .collect()
 }
 
+/// The error of `model.init` from `path` into `model` (a model of `config`).
+fn init_error(model: Detector, config: &DetectorConfig, path: &Path, dev: &Device) -> String {
+    format!("{:#}", load_init(model, config, path, dev).unwrap_err())
+}
+
 fn frozen(path: &str) -> bool {
     ["backbone.l0.", "backbone.l1.", "backbone.l2."]
         .iter()
@@ -132,15 +137,11 @@ fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
 
     // Another family, a PyTorch file for YOLO, garbage: clean errors naming the file.
     let mcfg = chicktrain::model::maskrcnn::MaskRcnnConfig::new(18, 1).with_width_mult(0.25);
-    let e = format!(
-        "{:#}",
-        load_init(
-            Detector::MaskRcnn(mcfg.init(&dev)),
-            &DetectorConfig::Maskrcnn(mcfg.clone()),
-            &start,
-            &dev
-        )
-        .unwrap_err()
+    let e = init_error(
+        Detector::MaskRcnn(mcfg.init(&dev)),
+        &DetectorConfig::Maskrcnn(mcfg.clone()),
+        &start,
+        &dev,
     );
     assert!(
         e.contains("best.bpk") && e.contains("cannot start the other"),
@@ -148,15 +149,11 @@ fn init_from_a_checkpoint_and_frozen_stages_stay_bit_identical() {
     );
     let pth =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/torchvision/resnet18_w8.pth");
-    let e = format!(
-        "{:#}",
-        load_init(
-            Detector::Yolo(c.init(&dev)),
-            &DetectorConfig::Yolo(c.clone()),
-            &pth,
-            &dev
-        )
-        .unwrap_err()
+    let e = init_error(
+        Detector::Yolo(c.init(&dev)),
+        &DetectorConfig::Yolo(c.clone()),
+        &pth,
+        &dev,
     );
     assert!(
         e.contains("resnet18_w8.pth") && e.contains("no ultralytics weights fit it"),

@@ -5,15 +5,14 @@
 //! evaluator (issue 17's criterion); a few steps on ndarray run without NaN.
 
 use burn::module::Module;
-use burn::optim::{AdamWConfig, GradientsParams};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::Device;
 use chicktrain::model::mask2former::{CriterionConfig, Mask2Former, Mask2FormerConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 mod common;
 
-use common::overfit::{assert_overfits, assert_terms_fell, ellipses, BATCH, SIZE};
+use common::overfit::{assert_overfits, assert_terms_fell, batch, overfit, BATCH, SIZE};
 
 fn tiny_config() -> Mask2FormerConfig {
     Mask2FormerConfig {
@@ -40,26 +39,18 @@ fn tiny_config() -> Mask2FormerConfig {
 fn train(dev: Device, steps: usize, calib: usize) -> (Vec<[f32; 4]>, Mask2Former) {
     dev.seed(7);
     let ad = dev.clone().autodiff();
-    let mut model = tiny_config().init(&ad);
-    let mut optim = AdamWConfig::new().with_weight_decay(0.0).init();
-    let (px, targets) = ellipses(11);
-    let x = Tensor::<4>::from_data(TensorData::new(px, [BATCH, 3, SIZE, SIZE]), &ad);
+    let model = tiny_config().init(&ad);
+    let (x, targets) = batch(&ad);
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let mut log = Vec::new();
-    for step in 0..steps + calib {
+    overfit(model, (steps, calib, LR), |model: &Mask2Former, step| {
         let losses = model.forward_train(x.clone(), &targets, &mut rng);
         let v = losses.values();
         assert!(
             v.iter().all(|x| x.is_finite()),
             "step {step}: loss terms {v:?}"
         );
-        let grads = GradientsParams::from_grads(losses.total.backward(), &model);
-        if step < steps {
-            model = optim.step(LR, model, grads);
-            log.push(v);
-        }
-    }
-    (log, model)
+        (losses.total, v)
+    })
 }
 
 const LR: f64 = 1e-3;
@@ -78,8 +69,7 @@ fn tiny_model_overfits_one_batch_on_flex() {
     assert_terms_fell(&log, &[(3, "total loss")], 0.5);
     assert_terms_fell(&log, &[(0, "cls"), (1, "mask"), (2, "dice")], 0.7);
     let eval = model.valid();
-    let (px, targets) = ellipses(11);
-    let x = Tensor::<4>::from_data(TensorData::new(px, [BATCH, 3, SIZE, SIZE]), &Device::flex());
+    let (x, targets) = batch(&Device::flex());
     let dets = eval.forward_infer(x);
     assert_eq!(dets.len(), BATCH);
     for d in dets.iter().flatten() {

@@ -5,7 +5,7 @@
 //! smoke criterion); a few steps on ndarray run without NaN.
 
 use burn::module::Module;
-use burn::optim::{AdamWConfig, GradientsParams};
+use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 use chicktrain::eval::coco_eval::{evaluate, IouType};
 use chicktrain::model::maskrcnn::{ImageTargets, MaskRcnn, MaskRcnnConfig};
@@ -14,7 +14,9 @@ use rand_chacha::ChaCha8Rng;
 
 mod common;
 
-use common::overfit::{assert_overfits, assert_terms_fell, ellipses, to_coco, BATCH, SIZE};
+use common::overfit::{
+    assert_overfits, assert_terms_fell, batch, ellipses, overfit, to_coco, BATCH, SIZE,
+};
 
 fn tiny_config() -> MaskRcnnConfig {
     common::tiny::tiny_maskrcnn(
@@ -33,24 +35,16 @@ fn tiny_config() -> MaskRcnnConfig {
 fn train(dev: Device, steps: usize, calib: usize) -> (Vec<[f32; 6]>, MaskRcnn) {
     dev.seed(7);
     let ad = dev.clone().autodiff();
-    let mut model = tiny_config().init(&ad);
-    let mut optim = AdamWConfig::new().with_weight_decay(0.0).init();
-    let (px, targets) = ellipses(11);
-    let x = Tensor::<4>::from_data(TensorData::new(px, [BATCH, 3, SIZE, SIZE]), &ad);
+    let model = tiny_config().init(&ad);
+    let (x, targets) = batch(&ad);
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let mut log = Vec::new();
-    for step in 0..steps + calib {
+    overfit(model, (steps, calib, 1e-3), |model: &MaskRcnn, _| {
         let losses = model.forward_train(x.clone(), &targets, &mut rng);
         let v = losses.values();
         assert!(v.iter().all(|x| x.is_finite()), "loss terms {v:?}");
         assert!(losses.num_fg > 0, "GT boxes are always foreground RoIs");
-        let grads = GradientsParams::from_grads(losses.total.backward(), &model);
-        if step < steps {
-            model = optim.step(1e-3, model, grads);
-            log.push(v);
-        }
-    }
-    (log, model)
+        (losses.total, v)
+    })
 }
 
 #[test]
@@ -62,8 +56,7 @@ fn tiny_model_learns_on_flex() {
     assert_terms_fell(&log, &[(0, "rpn_cls"), (2, "roi_cls"), (4, "mask")], 0.7);
 
     let eval = model.valid();
-    let (px, _) = ellipses(11);
-    let x = Tensor::<4>::from_data(TensorData::new(px, [BATCH, 3, SIZE, SIZE]), &Device::flex());
+    let (x, _) = batch(&Device::flex());
     let dets = eval.forward_infer(x);
     assert_eq!(dets.len(), BATCH);
     for d in dets.iter().flatten() {

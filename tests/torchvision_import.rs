@@ -75,20 +75,24 @@ fn check<const D: usize>(what: &str, t: Tensor<D>, want: &TensorData) {
     assert!(e <= TOL, "{what}: max relative error {e:e} > {TOL:e}");
 }
 
-/// The model the Mask R-CNN fixture describes: paper preset, R50 at width ×0.125, 16-wide
-/// FPN, 32-wide box FCs, 16-wide mask convs, one class.
 /// `model.init` of `path` into a fresh model of `cfg`.
 fn init_from(cfg: MaskRcnnConfig, path: &Path, dev: &Device) -> anyhow::Result<(Detector, String)> {
     let c = DetectorConfig::Maskrcnn(cfg);
     load_init(c.init(dev), &c, path, dev)
 }
 
+/// The model the Mask R-CNN fixture describes: paper preset, R50 at width ×0.125, 16-wide
+/// FPN, 32-wide box FCs, 16-wide mask convs, one class, 64 px input.
 fn fixture_config() -> MaskRcnnConfig {
-    let p = MaskRcnnConfig::paper(50, 1);
+    fixture_layout(1).with_input_size(64)
+}
+
+/// The fixture's layers with `classes` classes (the paper preset's input size).
+fn fixture_layout(classes: usize) -> MaskRcnnConfig {
+    let p = MaskRcnnConfig::paper(50, classes);
     p.clone()
         .with_width_mult(0.125)
         .with_fpn_channels(16)
-        .with_input_size(64)
         .with_roi(RoiHeadsConfig {
             fc_dim: 32,
             ..p.roi.clone()
@@ -249,19 +253,7 @@ fn other_class_counts_reinitialise_the_predictors_and_mismatches_name_the_key() 
     let dev = Device::flex();
     let path = fixture("maskrcnn_r50_w8.pth");
     // 3 classes here, 1 + background in the file: the three predictors stay fresh.
-    let p = MaskRcnnConfig::paper(50, 3);
-    let m3 = p
-        .clone()
-        .with_width_mult(0.125)
-        .with_fpn_channels(16)
-        .with_roi(RoiHeadsConfig {
-            fc_dim: 32,
-            ..p.roi.clone()
-        })
-        .with_mask(MaskHeadConfig {
-            conv_dim: 16,
-            ..p.mask.clone()
-        });
+    let m3 = fixture_layout(3);
     let (_, note) = init_from(m3, &path, &dev).unwrap();
     assert!(
         note.contains("6 tensors keep their fresh initialisation"),

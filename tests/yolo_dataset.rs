@@ -31,6 +31,29 @@ fn write(path: &Path, text: &str) {
     std::fs::write(path, text).unwrap();
 }
 
+/// `convert coco2yolo` of the COCO files `splits` into the folder `out`.
+fn coco2yolo(splits: &[&Path], out: &Path) -> std::process::Output {
+    let mut args = vec!["convert", "coco2yolo"];
+    args.extend(splits.iter().map(|p| s(p)));
+    args.extend(["--out", s(out)]);
+    run(&args)
+}
+
+/// `train --config quickstart` with a `--set` of each of `sets`.
+fn train_quickstart(sets: &[&str]) -> std::process::Output {
+    let mut args = vec!["train", "--config", "quickstart"];
+    for set in sets {
+        args.extend(["--set", set]);
+    }
+    run(&args)
+}
+
+/// `yaml` written to `path`, loaded.
+fn write_and_load(path: &Path, yaml: &str) -> yolo::YoloDataset {
+    write(path, yaml);
+    yolo::load(path).unwrap()
+}
+
 /// The error of loading `ds/data.yaml` under `d` written as `yaml`.
 fn load_err(d: &Path, yaml: &str) -> String {
     write(&d.join("ds/data.yaml"), yaml);
@@ -94,11 +117,7 @@ fn reads_the_ultralytics_layout_with_its_own_split() {
     // b has no label file: an image without instances. c's is empty.
     write(&d.join("ds/labels/val/c.txt"), "");
     write(&d.join("ds/labels/test/e.txt"), "1 0 0 1 0 1 1\n");
-    write(
-        &d.join("ds/data.yaml"),
-        "path: .\ntrain: images/train\nval: images/val\ntest: images/test\nnames:\n  0: carcass\n  1: wing\n",
-    );
-    let y = yolo::load(&d.join("ds/data.yaml")).unwrap();
+    let y = write_and_load(&d.join("ds/data.yaml"), "path: .\ntrain: images/train\nval: images/val\ntest: images/test\nnames:\n  0: carcass\n  1: wing\n");
     let ds = &y.coco;
     let cats: Vec<(u64, &str)> = ds
         .categories
@@ -165,11 +184,7 @@ fn reads_roboflow_exports_and_image_lists() {
             "0 0.25 0.25 0.75 0.25 0.5 0.75\n",
         );
     }
-    write(
-        &d.join("rf/data.yaml"),
-        "train: ../train/images\nval: ../valid/images\ntest: ../test/images\n\nnc: 1\nnames: ['carcass']\n\nroboflow:\n  workspace: farm\n  version: 2\n",
-    );
-    let y = yolo::load(&d.join("rf/data.yaml")).unwrap();
+    let y = write_and_load(&d.join("rf/data.yaml"), "train: ../train/images\nval: ../valid/images\ntest: ../test/images\n\nnc: 1\nnames: ['carcass']\n\nroboflow:\n  workspace: farm\n  version: 2\n");
     let own = y.own_split.unwrap();
     assert_eq!(names(&y.coco, &own.val), ["b.jpg"]);
     assert_eq!(y.coco.annotations.len(), 3);
@@ -179,11 +194,10 @@ fn reads_roboflow_exports_and_image_lists() {
         &d.join("rf/train.txt"),
         "./train/images/a.jpg\n\n./test/images/c.jpg\n",
     );
-    write(
+    let y = write_and_load(
         &d.join("rf/list.yaml"),
         "train: train.txt\nval: [valid/images]\nnames: [carcass]\n",
     );
-    let y = yolo::load(&d.join("rf/list.yaml")).unwrap();
     let own = y.own_split.unwrap();
     assert_eq!(names(&y.coco, &own.train), ["a.jpg", "c.jpg"]);
     assert!(own.test.is_empty());
@@ -300,21 +314,10 @@ fn missing_keys_folders_and_overlaps_are_clear_errors() {
     let e = load_err(&d, "train: images/t\nval: images/v\nnames: [c]\n");
     assert!(e.contains("b.png"), "{e}");
     // The config: kind = "yolo" without yaml, a yaml that is not there.
-    let out = run(&[
-        "train",
-        "--config",
-        "quickstart",
-        "--set",
-        "data.real.kind=\"yolo\"",
-    ]);
+    let out = train_quickstart(&["data.real.kind=\"yolo\""]);
     assert_clean_error(&out, &["data.real.yaml"]);
-    let out = run(&[
-        "train",
-        "--config",
-        "quickstart",
-        "--set",
+    let out = train_quickstart(&[
         "data.real.kind=\"yolo\"",
-        "--set",
         "data.real.yaml=\"nowhere/data.yaml\"",
     ]);
     assert_clean_error(&out, &["nowhere/data.yaml", "does not exist"]);
@@ -445,16 +448,7 @@ fn iou(a: &Rle, b: &Rle) -> f64 {
 fn coco_per_split_round_trips_through_coco2yolo() {
     let d = tmp("yolo-roundtrip");
     let [train, val, test] = coco_split_set(&d.join("coco"));
-    let out = run(&[
-        "convert",
-        "coco2yolo",
-        s(&train),
-        s(&val),
-        s(&test),
-        "--out",
-        s(&d.join("y")),
-    ]);
-    assert_success(&out);
+    assert_success(&coco2yolo(&[&train, &val, &test], &d.join("y")));
     assert!(d.join("y/images/val/img3.png").is_file());
     assert!(d.join("y/labels/test/img5.txt").is_file());
 
@@ -528,13 +522,7 @@ fn coco_per_split_round_trips_through_coco2yolo() {
     ds.images.retain(|i| i.id != 11); // keep it to the single-polygon instances
     ds.annotations.retain(|a| a.image_id != 11);
     ds.save(&all).unwrap();
-    assert_success(&run(&[
-        "convert",
-        "coco2yolo",
-        s(&all),
-        "--out",
-        s(&d.join("y1")),
-    ]));
+    assert_success(&coco2yolo(&[&all], &d.join("y1")));
     let y1 = yolo::load(&d.join("y1/data.yaml")).unwrap();
     assert!(y1.own_split.is_none());
     assert_eq!(y1.coco.images.len(), 2);
@@ -547,15 +535,7 @@ fn coco_per_split_round_trips_through_coco2yolo() {
 fn trains_from_a_converted_yaml() {
     let d = tmp("yolo-train");
     let [train, val, test] = coco_split_set(&d.join("coco"));
-    assert_success(&run(&[
-        "convert",
-        "coco2yolo",
-        s(&train),
-        s(&val),
-        s(&test),
-        "--out",
-        s(&d.join("y")),
-    ]));
+    assert_success(&coco2yolo(&[&train, &val, &test], &d.join("y")));
     let cfg = yolo_config(&d, &d.join("y/data.yaml"));
     let opts = chicktrain::train::trainer::TrainOptions {
         run_dir: Some(d.join("run")),

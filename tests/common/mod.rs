@@ -28,6 +28,21 @@ pub fn run<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
     bin().args(args).output().unwrap()
 }
 
+/// `render` of one 64 px image of the carcass mesh `carcass` into `out` (the arguments).
+pub fn render_one<'a>(carcass: &'a str, out: &'a str) -> [&'a str; 9] {
+    [
+        "render",
+        "--count",
+        "1",
+        "--size",
+        "64",
+        "--carcass",
+        carcass,
+        "--out",
+        out,
+    ]
+}
+
 /// `chicktrain export --checkpoint CHECKPOINT --format FORMAT` and `extra` flags.
 pub fn export(checkpoint: &str, format: &str, extra: &[&str]) -> Output {
     let mut args = vec!["export", "--checkpoint", checkpoint, "--format", format];

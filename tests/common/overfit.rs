@@ -1,9 +1,12 @@
 //! The one-batch overfitting scene of the `*_learns` model tests: `BATCH` 64 px images of
 //! filled ellipses with their masks, the ground truth and detections in COCO form for
-//! the shared evaluator (image ids from 1, category 1), and the two checks every
-//! `*_learns` test makes: the logged loss terms fell ([`assert_terms_fell`]) and the
-//! eval-mode model overfits the batch ([`assert_overfits`]).
+//! the shared evaluator (image ids from 1, category 1), the optimiser loop of the
+//! `*_learns` tests ([`overfit`]) and the two checks they make: the logged loss terms fell
+//! ([`assert_terms_fell`]) and the eval-mode model overfits the batch ([`assert_overfits`]).
 
+use burn::module::Module;
+use burn::optim::{AdamWConfig, GradientsParams};
+use burn::tensor::{Device, Tensor, TensorData};
 use chicktrain::annotations::coco::{
     CocoAnnotation, CocoCategory, CocoDataset, CocoImage, Detection as CocoDetection, Segmentation,
 };
@@ -139,4 +142,33 @@ pub fn assert_overfits(targets: &[ImageTargets], dets: &[Vec<Detection>]) {
         "segm AP50 {} on the training batch",
         segm.stats[1]
     );
+}
+
+/// The batch of [`ellipses`]`(11)` on `device`: `[BATCH, 3, SIZE, SIZE]` pixels and targets.
+pub fn batch(device: &Device) -> (Tensor<4>, Vec<ImageTargets>) {
+    let (px, targets) = ellipses(11);
+    let x = Tensor::<4>::from_data(TensorData::new(px, [BATCH, 3, SIZE, SIZE]), device);
+    (x, targets)
+}
+
+/// `steps` AdamW steps of `model` at learning rate `lr` (no weight decay), then `calib`
+/// forward/backward passes without updates, so that BatchNorm's running statistics match
+/// the final weights in eval mode. `loss(model, step)` is a step's total and its host
+/// terms; returns the terms of the update steps and the model.
+pub fn overfit<M: Module, const N: usize>(
+    mut model: M,
+    (steps, calib, lr): (usize, usize, f64),
+    mut loss: impl FnMut(&M, usize) -> (Tensor<1>, [f32; N]),
+) -> (Vec<[f32; N]>, M) {
+    let mut optim = AdamWConfig::new().with_weight_decay(0.0).init();
+    let mut log = Vec::new();
+    for step in 0..steps + calib {
+        let (total, v) = loss(&model, step);
+        let grads = GradientsParams::from_grads(total.backward(), &model);
+        if step < steps {
+            model = optim.step(lr, model, grads);
+            log.push(v);
+        }
+    }
+    (log, model)
 }
