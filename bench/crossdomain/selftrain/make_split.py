@@ -1,28 +1,33 @@
 #!/usr/bin/env python3
-"""The fixed self-training split of the Blender cross-domain set (issue 38, part 3).
+"""The fixed self-training split of a cross-domain set (issue 38, part 3).
 
-Image ids 1-60 (xd_00000.jpg ... xd_00059.jpg) are the unlabeled-train half: links to
-them go into unlabeled/ (their labels are never read). Ids 61-120 are the test half:
-their images and annotations go into test.json, a COCO file that test.toml scores.
-The images were drawn independently per id (make_crossdomain.py seeds image k with
-[seed, k]), so a split by id is a random split. Standard library only; run from the
+The first half of the image ids (Blender set: ids 1-60, xd_00000.jpg ... xd_00059.jpg;
+Mitsuba set: ids 1-50) is the unlabeled-train half: links to them go into unlabeled/
+(their labels are never read). The second half is the test half: its images and
+annotations go into test.json, a COCO file that test.toml scores. Both sets draw each
+image independently per id (make_crossdomain.py and make_crossdomain2.py seed image k
+with [seed, k]), so a split by id is a random split. Standard library only; run from the
 repository root:
 
-    python3 bench/crossdomain/selftrain/make_split.py
+    python3 bench/crossdomain/selftrain/make_split.py            # the Blender set
+    python3 bench/crossdomain/selftrain/make_split.py \
+        bench/crossdomain2/set bench/crossdomain2/selftrain   # the Mitsuba set
 """
 import json
 import os
+import sys
 
-SET = "bench/crossdomain/set"
-OUT = "bench/crossdomain/selftrain"
-SPLIT_ID = 60  # ids <= 60: unlabeled-train, ids > 60: test
+SET, OUT = (sys.argv[1], sys.argv[2]) if len(sys.argv) == 3 else (
+    "bench/crossdomain/set", "bench/crossdomain/selftrain")
 
 
 def main():
     with open(os.path.join(SET, "annotations.json")) as f:
         coco = json.load(f)
     images = sorted(coco["images"], key=lambda i: i["id"])
-    assert len(images) == 120 and [i["id"] for i in images] == list(range(1, 121))
+    n = len(images)
+    assert n % 2 == 0 and [i["id"] for i in images] == list(range(1, n + 1))
+    SPLIT_ID = n // 2  # ids <= n/2: unlabeled-train, ids > n/2: test
     unl = os.path.join(OUT, "unlabeled")
     os.makedirs(unl, exist_ok=True)
     for name in os.listdir(unl):
@@ -30,7 +35,7 @@ def main():
     for im in images:
         if im["id"] <= SPLIT_ID:
             name = os.path.basename(im["file_name"])
-            os.symlink(os.path.join("..", "..", "set", "images", name), os.path.join(unl, name))
+            os.symlink(os.path.relpath(os.path.join(SET, "images", name), unl), os.path.join(unl, name))
     test_ids = {i["id"] for i in images if i["id"] > SPLIT_ID}
     test = dict(coco)
     test["images"] = [i for i in images if i["id"] in test_ids]
