@@ -400,9 +400,9 @@ fn f64_tensors_take_the_default_path() {
     let beta = FlexTensor::from_data(burn_backend::TensorData::new(vec![0.0f64, 1.0], [2]));
     let (out, mean, var) = batch_norm_train(x, gamma, beta, 0.0);
     assert_eq!(out.dtype(), DType::F64);
-    let mean: Vec<f64> = mean.into_data().to_vec::<f64>().unwrap();
-    let var: Vec<f64> = var.into_data().to_vec::<f64>().unwrap();
-    let out: Vec<f64> = out.into_data().to_vec::<f64>().unwrap();
+    let mean: Vec<f64> = mean.into_data().try_to_vec::<f64>().unwrap();
+    let var: Vec<f64> = var.into_data().try_to_vec::<f64>().unwrap();
+    let out: Vec<f64> = out.into_data().try_to_vec::<f64>().unwrap();
     // Channel 0: 1, 4, -1 → mean 4/3; channel 1: 2, 8, 0 → mean 10/3.
     assert!((mean[0] - 4.0 / 3.0).abs() < 1e-12 && (mean[1] - 10.0 / 3.0).abs() < 1e-12);
     let var0 = [1.0f64, 4.0, -1.0]
