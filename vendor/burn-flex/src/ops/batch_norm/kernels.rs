@@ -16,9 +16,14 @@ use burn_std::Bytes;
 
 use crate::{FlexTensor, Layout};
 
-/// Independent accumulators per reduction: breaks the add dependency chain so
-/// the loop vectorises (f64 lanes of AVX2: two vectors per sum).
-const LANES: usize = 8;
+/// Independent f32 accumulators per reduction: breaks the add dependency
+/// chain so the loop vectorises (four SSE or two AVX registers per sum).
+const LANES: usize = 16;
+
+/// Values summed in f32 lanes before each flush into the f64 totals, so each
+/// lane adds at most 16 values in f32 (rounding ≤ ~16 ulp of a partial sum,
+/// ~1e-6) and the long sums over a channel are f64.
+const FLUSH: usize = 16 * LANES;
 
 /// Below this many elements a pass stays on the calling thread.
 #[cfg(feature = "rayon")]
@@ -105,43 +110,50 @@ fn per_channel_sums(partial: &[(f64, f64)], c: usize) -> Vec<(f64, f64)> {
     sums
 }
 
-/// `(Σ (x − k), Σ (x − k)²)` in f64; each f32 difference and square is exact in f64.
-fn shifted_sums(x: &[f32], k: f64) -> (f64, f64) {
-    let (mut s, mut q) = ([0.0f64; LANES], [0.0f64; LANES]);
-    let chunks = x.chunks_exact(LANES);
-    let rest = chunks.remainder();
-    for ch in chunks {
-        for l in 0..LANES {
-            let d = ch[l] as f64 - k;
-            s[l] += d;
-            q[l] += d * d;
+/// `(Σ (x − k), Σ (x − k)²)`: f32 lanes flushed into f64 every `FLUSH` values.
+fn shifted_sums(x: &[f32], k: f32) -> (f64, f64) {
+    let (mut s, mut q) = (0.0f64, 0.0f64);
+    for part in x.chunks(FLUSH) {
+        let (mut s32, mut q32) = ([0.0f32; LANES], [0.0f32; LANES]);
+        let chunks = part.chunks_exact(LANES);
+        let rest = chunks.remainder();
+        for ch in chunks {
+            for l in 0..LANES {
+                let d = ch[l] - k;
+                s32[l] += d;
+                q32[l] += d * d;
+            }
         }
-    }
-    let (mut s, mut q) = (s.iter().sum::<f64>(), q.iter().sum::<f64>());
-    for &v in rest {
-        let d = v as f64 - k;
-        s += d;
-        q += d * d;
+        for (l, &v) in rest.iter().enumerate() {
+            let d = v - k;
+            s32[l] += d;
+            q32[l] += d * d;
+        }
+        s += s32.iter().map(|&v| v as f64).sum::<f64>();
+        q += q32.iter().map(|&v| v as f64).sum::<f64>();
     }
     (s, q)
 }
 
-/// `(Σ g, Σ g·(x − m))` in f64.
-fn grad_sums(g: &[f32], x: &[f32], m: f64) -> (f64, f64) {
-    let (mut s, mut q) = ([0.0f64; LANES], [0.0f64; LANES]);
-    let (gc, xc) = (g.chunks_exact(LANES), x.chunks_exact(LANES));
-    let (gr, xr) = (gc.remainder(), xc.remainder());
-    for (gch, xch) in gc.zip(xc) {
-        for l in 0..LANES {
-            let gv = gch[l] as f64;
-            s[l] += gv;
-            q[l] += gv * (xch[l] as f64 - m);
+/// `(Σ g, Σ g·(x − m))`: f32 lanes flushed into f64 every `FLUSH` values.
+fn grad_sums(g: &[f32], x: &[f32], m: f32) -> (f64, f64) {
+    let (mut s, mut q) = (0.0f64, 0.0f64);
+    for (gp, xp) in g.chunks(FLUSH).zip(x.chunks(FLUSH)) {
+        let (mut s32, mut q32) = ([0.0f32; LANES], [0.0f32; LANES]);
+        let (gc, xc) = (gp.chunks_exact(LANES), xp.chunks_exact(LANES));
+        let (gr, xr) = (gc.remainder(), xc.remainder());
+        for (gch, xch) in gc.zip(xc) {
+            for l in 0..LANES {
+                s32[l] += gch[l];
+                q32[l] += gch[l] * (xch[l] - m);
+            }
         }
-    }
-    let (mut s, mut q) = (s.iter().sum::<f64>(), q.iter().sum::<f64>());
-    for (&gv, &xv) in gr.iter().zip(xr) {
-        s += gv as f64;
-        q += gv as f64 * (xv as f64 - m);
+        for (l, (&gv, &xv)) in gr.iter().zip(xr).enumerate() {
+            s32[l] += gv;
+            q32[l] += gv * (xv - m);
+        }
+        s += s32.iter().map(|&v| v as f64).sum::<f64>();
+        q += q32.iter().map(|&v| v as f64).sum::<f64>();
     }
     (s, q)
 }
@@ -150,7 +162,7 @@ fn grad_sums(g: &[f32], x: &[f32], m: f64) -> (f64, f64) {
 /// buffer. Sums are shifted by each channel's first value (Chan et al.'s
 /// shifted data), so a large common offset does not cancel the variance.
 pub(super) fn channel_stats(x: &[f32], d: Dims) -> Vec<(f64, f64)> {
-    let shift: Vec<f64> = (0..d.c).map(|c| x[c * d.s] as f64).collect();
+    let shift: Vec<f32> = (0..d.c).map(|c| x[c * d.s]).collect();
     let partial = per_block(d, |b| {
         shifted_sums(&x[b * d.s..(b + 1) * d.s], shift[b % d.c])
     });
@@ -161,7 +173,7 @@ pub(super) fn channel_stats(x: &[f32], d: Dims) -> Vec<(f64, f64)> {
         .map(|((s, q), &k)| {
             let mean_shifted = s / m;
             (
-                k + mean_shifted,
+                k as f64 + mean_shifted,
                 (q / m - mean_shifted * mean_shifted).max(0.0),
             )
         })
@@ -172,7 +184,7 @@ pub(super) fn channel_stats(x: &[f32], d: Dims) -> Vec<(f64, f64)> {
 pub(super) fn channel_grad_sums(g: &[f32], x: &[f32], mean: &[f32], d: Dims) -> Vec<(f64, f64)> {
     let partial = per_block(d, |b| {
         let r = b * d.s..(b + 1) * d.s;
-        grad_sums(&g[r.clone()], &x[r], mean[b % d.c] as f64)
+        grad_sums(&g[r.clone()], &x[r], mean[b % d.c])
     });
     per_channel_sums(&partial, d.c)
 }

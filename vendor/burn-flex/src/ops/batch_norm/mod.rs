@@ -8,8 +8,8 @@
 //! over the activation forward and backward. In a YOLO11 training step on
 //! flex that was ~12 % of all samples. Here each `(sample, channel)` block of
 //! an NCHW tensor is contiguous, so the statistics are one pass of per-channel
-//! f64 sums (shifted by the channel's first value, so a large mean does not
-//! cancel the variance), the normalisation one pass, and the backward one pass
+//! sums (f32 lanes flushed into f64 every 256 values, shifted by the channel's
+//! first value so a large mean does not cancel the variance), the normalisation one pass, and the backward one pass
 //! for `Σ g` and `Σ g·x̂` and one for the input gradient (in place in the
 //! output gradient's buffer when nothing else holds it).
 //!
