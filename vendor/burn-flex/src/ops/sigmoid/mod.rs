@@ -64,8 +64,9 @@ pub fn sigmoid(mut tensor: FlexTensor) -> FlexTensor {
 
 /// `grad · s · (1 - s)` for an f32 sigmoid output `s` and its gradient, in
 /// the gradient's buffer (or the output's) when it is contiguous and not
-/// shared. `None` when neither can take it (different shapes, views, shared
-/// buffers): the caller then runs upstream's binary op.
+/// shared. `Err` hands both tensors back when neither can take it (another
+/// dtype, different shapes, views, shared buffers): the caller then runs
+/// upstream's binary op.
 pub fn sigmoid_backward(
     output: FlexTensor,
     grad: FlexTensor,
