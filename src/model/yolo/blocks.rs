@@ -470,52 +470,54 @@ mod tests {
         assert_eq!(c.macs([64, 64]), ((16 * 32 * 9 * 32 * 32) as u64, [32, 32]));
     }
 
-    /// flex's unary ops run split over the rayon pool for large tensors (the patch in
-    /// vendor/burn-flex); the split must not change a bit. Every element of SiLU's sigmoid
-    /// against upstream's scalar formula, on the in-place path (a tensor nobody else holds),
-    /// the allocating path (SiLU's `x * sigmoid(x)` keeps `x`) and a transposed view, on a
-    /// four-thread pool so the split happens on any machine.
+    /// flex's f32 sigmoid (vendor/burn-flex patches 1 and 4: a vectorised kernel split over
+    /// the rayon pool for large tensors) must not change a bit with the thread count, and
+    /// stays within 3 ulp (at most 1e-6 relative) of the exact sigmoid. Every element of
+    /// SiLU's sigmoid on a four-thread pool against a one-thread pool and against f64, on
+    /// the in-place path (a tensor nobody else holds), the allocating path (SiLU's
+    /// `x * sigmoid(x)` keeps `x`) and a transposed view.
     #[test]
     fn sigmoid_split_over_threads_is_bit_exact() {
         use burn::tensor::activation::sigmoid;
         use burn::tensor::{Distribution, TensorData};
-        let reference = |v: f32| {
-            if v >= 0.0 {
-                1.0 / (1.0 + (-v).exp())
-            } else {
-                let e = v.exp();
-                e / (1.0 + e)
-            }
-        };
         let d = dev();
-        let check = |got: Tensor<4>, input: &[f32], what: &str| {
-            let got: Vec<f32> = got.into_data().try_to_vec::<f32>().unwrap();
-            assert_eq!(got.len(), input.len());
-            for (i, (g, &v)) in got.iter().zip(input).enumerate() {
-                assert_eq!(
-                    g.to_bits(),
-                    reference(v).to_bits(),
-                    "{what}: element {i} of {v}"
-                );
-            }
+        // 2·8·48·56 = 43008 elements: above the split threshold, not a multiple of the chunk.
+        let x = Tensor::<4>::random([2, 8, 48, 56], Distribution::Normal(0.0, 6.0), &d);
+        let host: Vec<f32> = x.to_data().try_to_vec::<f32>().unwrap();
+        let fresh = || Tensor::<4>::from_data(TensorData::new(host.clone(), [2, 8, 48, 56]), &d);
+        let bits = |t: Tensor<4>| -> Vec<u32> {
+            let v: Vec<f32> = t.into_data().try_to_vec::<f32>().unwrap();
+            v.iter().map(|x| x.to_bits()).collect()
         };
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(4)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            // 2·8·48·56 = 43008 elements: above the split threshold, not a multiple of the chunk.
-            let x = Tensor::<4>::random([2, 8, 48, 56], Distribution::Normal(0.0, 6.0), &d);
-            let host: Vec<f32> = x.to_data().try_to_vec::<f32>().unwrap();
-            let fresh =
-                || Tensor::<4>::from_data(TensorData::new(host.clone(), [2, 8, 48, 56]), &d);
-            check(sigmoid(fresh()), &host, "in place");
-            let kept = fresh();
-            check(sigmoid(kept.clone()), &host, "allocating");
-            drop(kept);
-            let t = fresh().swap_dims(1, 3);
-            let t_host: Vec<f32> = t.to_data().try_to_vec::<f32>().unwrap();
-            check(sigmoid(t), &t_host, "transposed");
-        });
+        let on = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let in_place = bits(sigmoid(fresh()));
+                let kept = fresh();
+                let allocating = bits(sigmoid(kept.clone()));
+                drop(kept);
+                let transposed = bits(sigmoid(fresh().swap_dims(1, 3)).swap_dims(1, 3));
+                [in_place, allocating, transposed]
+            })
+        };
+        let (one, four) = (on(1), on(4));
+        for (what, (a, b)) in ["in place", "allocating", "transposed"]
+            .iter()
+            .zip(one.iter().zip(&four))
+        {
+            assert_eq!(a, b, "{what}: 1 vs 4 threads");
+            assert_eq!(a, &one[0], "{what} vs in place");
+        }
+        for (&g, &v) in four[0].iter().zip(&host) {
+            let exact = 1.0 / (1.0 + (-(v as f64)).exp());
+            let got = f32::from_bits(g) as f64;
+            assert!(
+                (got - exact).abs() <= 1e-6 * exact,
+                "sigmoid({v}) = {got}, exact {exact}"
+            );
+        }
     }
 }

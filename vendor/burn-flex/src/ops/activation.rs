@@ -103,10 +103,20 @@ impl ActivationOps<Flex> for Flex {
     }
 
     fn sigmoid(tensor: FloatTensor<Flex>) -> FloatTensor<Flex> {
+        // f32: vectorised kernels (chicktrain patch 4, see PATCH.md).
+        if tensor.dtype() == burn_backend::DType::F32 {
+            return crate::ops::sigmoid::sigmoid(tensor);
+        }
         unary_op(tensor, sigmoid_f32, sigmoid_f64)
     }
 
     fn sigmoid_backward(output: FloatTensor<Flex>, grad: FloatTensor<Flex>) -> FloatTensor<Flex> {
+        // f32, same shapes, a buffer to write in: one vectorised pass
+        // (chicktrain patch 4, see PATCH.md); otherwise upstream's op.
+        let (output, grad) = match crate::ops::sigmoid::sigmoid_backward(output, grad) {
+            Ok(done) => return done,
+            Err(inputs) => inputs,
+        };
         // grad * output * (1 - output)
         binary_op(
             output,

@@ -705,7 +705,10 @@ fn conv3d_1x1_impl<
     #[cfg(not(feature = "rayon"))]
     let parallelism = gemm::Parallelism::None;
 
-    let mut output = vec![zero; total_output];
+    // No zero fill (chicktrain patch 5, see PATCH.md): the (image, group)
+    // GEMMs below tile the whole output and each overwrites its block
+    // (`read_dst = false`; with k = 0 the `gemm` crate writes zeros).
+    let mut output: Vec<T> = Vec::with_capacity(total_output);
 
     {
         #[cfg(feature = "rayon")]
@@ -782,6 +785,9 @@ fn conv3d_1x1_impl<
             }
         }
     }
+
+    // SAFETY: every (image, group) block was written by its GEMM above.
+    unsafe { output.set_len(total_output) };
 
     if let Some(bias) = bias {
         let bias = bias.to_contiguous();
@@ -2675,6 +2681,42 @@ mod tests {
             assert!(
                 !actual_f32.is_nan() && (actual_f32 - expected).abs() <= bound,
                 "f16 small-channel mismatch at {i}: got {actual_f32}, expected {expected}, bound {bound}"
+            );
+        }
+    }
+
+    /// chicktrain patch 5: the 1×1 path's output is not zero-filled, so its
+    /// GEMMs must write every element. A NaN-filled buffer of the output's
+    /// size is freed first (glibc hands the block to the next allocation of
+    /// that size), then the result is checked against a direct loop.
+    #[test]
+    fn test_conv2d_1x1_writes_every_output_element() {
+        let (b, c_in, c_out, groups, hw) = (3, 6, 8, 2, 35);
+        let (cpg, mpg) = (c_in / groups, c_out / groups);
+        let x: Vec<f32> = (0..b * c_in * hw).map(|i| (i % 13) as f32 - 6.0).collect();
+        let w: Vec<f32> = (0..c_out * cpg)
+            .map(|i| (i % 5) as f32 * 0.25 - 0.5)
+            .collect();
+        let mut want = vec![0.0f32; b * c_out * hw];
+        for (bi, o, p) in
+            (0..b).flat_map(|bi| (0..c_out).flat_map(move |o| (0..hw).map(move |p| (bi, o, p))))
+        {
+            let grp = o / mpg;
+            want[(bi * c_out + o) * hw + p] = (0..cpg)
+                .map(|c| w[o * cpg + c] * x[(bi * c_in + grp * cpg + c) * hw + p])
+                .sum();
+        }
+        drop(core::hint::black_box(vec![f32::NAN; want.len()]));
+        let xt = FlexTensor::from_data(TensorData::new(x, vec![b, c_in, 5, 7]));
+        let wt = FlexTensor::from_data(TensorData::new(w, vec![c_out, cpg, 1, 1]));
+        let options = ConvOptions::new([1, 1], [0, 0], [1, 1], groups);
+        let got = conv2d_f32(xt, wt, None, &options);
+        let got: &[f32] = got.storage();
+        assert_eq!(got.len(), want.len());
+        for (i, (g, e)) in got.iter().zip(&want).enumerate() {
+            assert!(
+                (g - e).abs() <= 1e-5 * e.abs().max(1.0),
+                "element {i}: {g} vs {e}"
             );
         }
     }

@@ -118,6 +118,7 @@ pub mod pool;
 mod qtensor;
 pub mod reduce;
 pub mod repeat_dim;
+pub mod sigmoid;
 pub mod slice;
 pub mod sort;
 mod transaction;

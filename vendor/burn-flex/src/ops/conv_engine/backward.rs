@@ -5,8 +5,13 @@
 //! Summation order is fixed by the shape alone (never by thread scheduling):
 //! the weight gradient splits its (image, tile) list into a fixed number of
 //! chunks with tiles cut as for one thread, and adds the chunk sums in order.
+//!
+//! No zero-filled accumulators (chicktrain patch 5): the output buffers are
+//! allocated uninitialised and the first GEMM into each block overwrites it
+//! (`read_dst = false`, which the `gemm` crate honours without reading the
+//! destination); only col2im, which adds overlapping windows, zeroes its
+//! (image, group) block, inside the task that fills it.
 
-use alloc::vec;
 use alloc::vec::Vec;
 
 use super::geometry::Geometry;
@@ -15,7 +20,7 @@ use super::{Elem, Shared, for_each_task, threads};
 use crate::FlexTensor;
 
 /// Partial sums of the weight gradient computed independently, then added in order.
-const WEIGHT_GRAD_CHUNKS: usize = 8;
+pub(super) const WEIGHT_GRAD_CHUNKS: usize = 8;
 
 /// Input gradient `[batch, c_in, h, w]` as a flat vector.
 pub(super) fn x_grad<T: Elem>(g: &Geometry, weight: FlexTensor, dy: FlexTensor) -> Vec<T> {
@@ -23,7 +28,8 @@ pub(super) fn x_grad<T: Elem>(g: &Geometry, weight: FlexTensor, dy: FlexTensor) 
     let dy = dy.to_contiguous();
     let ws: &[T] = weight.storage();
     let dys: &[T] = dy.storage();
-    let mut dx = vec![T::ZERO; g.batch * g.c_in * g.in_plane()];
+    let len = g.batch * g.c_in * g.in_plane();
+    let mut dx: Vec<T> = Vec::with_capacity(len);
     let dst = Shared(dx.as_mut_ptr());
     if g.is_pointwise() {
         // Each tile's gradient is a disjoint block of dX: split by tiles.
@@ -35,6 +41,9 @@ pub(super) fn x_grad<T: Elem>(g: &Geometry, weight: FlexTensor, dy: FlexTensor) 
                 unsafe { pointwise_x_tile(g, ws, dys, dst, t / tiles.len(), grp, r0, r1) };
             }
         });
+        // SAFETY: the tiles cover every row of every (image, group) block,
+        // and each GEMM overwrote its block (`read_dst = false`).
+        unsafe { dx.set_len(len) };
         return dx;
     }
     // col2im of neighbouring tiles overlaps in input rows: a task owns a whole
@@ -49,9 +58,12 @@ pub(super) fn x_grad<T: Elem>(g: &Geometry, weight: FlexTensor, dy: FlexTensor) 
     for_each_task(tasks, |t, panel: &mut Vec<T>| {
         let (b, grp) = (t / g.groups, t % g.groups);
         let off = (b * g.c_in + grp * g.cpg) * g.in_plane();
-        // SAFETY: task `t` alone writes this (image, group) block of `dx`.
-        let dx_group =
-            unsafe { core::slice::from_raw_parts_mut(dst.at(off), g.cpg * g.in_plane()) };
+        // SAFETY: task `t` alone writes this (image, group) block of `dx`;
+        // it is zeroed (col2im adds into it) before the slice is made.
+        let dx_group = unsafe {
+            core::ptr::write_bytes(dst.at(off), 0, g.cpg * g.in_plane());
+            core::slice::from_raw_parts_mut(dst.at(off), g.cpg * g.in_plane())
+        };
         for &(r0, r1) in &tiles {
             let n = (r1 - r0) * g.ow;
             panel.resize(g.k() * n, T::ZERO);
@@ -83,6 +95,8 @@ pub(super) fn x_grad<T: Elem>(g: &Geometry, weight: FlexTensor, dy: FlexTensor) 
             col2im_rows(g, &panel[..g.k() * n], r0, r1, dx_group);
         }
     });
+    // SAFETY: the (image, group) tasks zeroed and filled every block.
+    unsafe { dx.set_len(len) };
     dx
 }
 
@@ -141,18 +155,30 @@ pub(super) fn weight_grad<T: Elem>(g: &Geometry, x: FlexTensor, dy: FlexTensor) 
     let tiles = g.tiles(1);
     let tasks = g.batch * tiles.len();
     let chunks = WEIGHT_GRAD_CHUNKS.min(tasks);
-    let mut partials = vec![T::ZERO; chunks * len];
+    let mut partials: Vec<T> = Vec::with_capacity(chunks * len);
     let dst = Shared(partials.as_mut_ptr());
     for_each_task(chunks, |c, panel: &mut Vec<T>| {
-        // SAFETY: chunk `c` alone writes its `len` partial sums.
-        let acc = unsafe { core::slice::from_raw_parts_mut(dst.at(c * len), len) };
-        for t in c * tasks / chunks..(c + 1) * tasks / chunks {
+        // Every chunk has at least one task (chunks ≤ tasks); its first
+        // overwrites the chunk's partial sums, the rest add to them.
+        let first = c * tasks / chunks;
+        for t in first..(c + 1) * tasks / chunks {
             let (r0, r1) = tiles[t % tiles.len()];
             for grp in 0..g.groups {
-                weight_tile(g, xs, dys, t / tiles.len(), grp, r0, r1, acc, panel);
+                // SAFETY: chunk `c` alone writes its `len` partial sums.
+                let acc = unsafe { dst.at(c * len + grp * g.mpg * g.k()) };
+                let tile = Tile {
+                    b: t / tiles.len(),
+                    grp,
+                    r0,
+                    r1,
+                };
+                unsafe { weight_tile(g, xs, dys, tile, acc, t == first, panel) };
             }
         }
     });
+    // SAFETY: each chunk's first task wrote all `len` of its sums (the
+    // groups' blocks tile `[c_out, k]`).
+    unsafe { partials.set_len(chunks * len) };
     let (first, rest) = partials.split_at_mut(len);
     for part in rest.chunks_exact(len) {
         for (a, &p) in first.iter_mut().zip(part) {
@@ -163,19 +189,31 @@ pub(super) fn weight_grad<T: Elem>(g: &Geometry, x: FlexTensor, dy: FlexTensor) 
     partials
 }
 
-/// `acc_g[mpg, k] += dY[mpg, n] · panel^T[n, k]` for one (image, group, rows).
-#[allow(clippy::too_many_arguments)]
-fn weight_tile<T: Elem>(
-    g: &Geometry,
-    xs: &[T],
-    dys: &[T],
+/// One (image, group, output rows `r0..r1`) of the weight gradient.
+#[derive(Clone, Copy)]
+struct Tile {
     b: usize,
     grp: usize,
     r0: usize,
     r1: usize,
-    acc: &mut [T],
+}
+
+/// `acc_g[mpg, k] (+)= dY[mpg, n] · panel^T[n, k]` for one tile: overwrites
+/// `acc_g` when `first`, adds to it otherwise.
+///
+/// # Safety
+/// `acc_g` points at the group's `[mpg, k]` block of a partial sum that no
+/// other thread writes concurrently, initialised unless `first`.
+unsafe fn weight_tile<T: Elem>(
+    g: &Geometry,
+    xs: &[T],
+    dys: &[T],
+    tile: Tile,
+    acc_g: *mut T,
+    first: bool,
     panel: &mut Vec<T>,
 ) {
+    let Tile { b, grp, r0, r1 } = tile;
     let (k, n) = (g.k(), (r1 - r0) * g.ow);
     let x_group = &xs[(b * g.c_in + grp * g.cpg) * g.in_plane()..][..g.cpg * g.in_plane()];
     // panel^T[t, kk] is panel[kk * n + t]; for 1×1 stride 1 it is x[kk, t].
@@ -186,7 +224,6 @@ fn weight_tile<T: Elem>(
         im2col_rows(g, x_group, r0, r1, &mut panel[..k * n]);
         (panel.as_ptr(), n)
     };
-    let acc_g = &mut acc[grp * g.mpg * k..(grp + 1) * g.mpg * k];
     let dy_off = (b * g.c_out + grp * g.mpg) * g.out_plane() + r0 * g.ow;
     // SAFETY: all pointers are in bounds of their slices for the given strides.
     unsafe {
@@ -194,10 +231,10 @@ fn weight_tile<T: Elem>(
             g.mpg,
             k,
             n,
-            acc_g.as_mut_ptr(),
+            acc_g,
             1,
             k as isize,
-            true,
+            !first,
             dys[dy_off..].as_ptr(),
             1,
             g.out_plane() as isize,

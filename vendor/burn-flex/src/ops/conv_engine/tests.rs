@@ -237,3 +237,50 @@ fn geometry_rejects_asymmetric_padding_and_bad_channels() {
     let big = ConvOptions::new([1, 1], [0, 0], [1, 1], 1);
     assert!(Geometry::new(&[1, 1, 2, 2], &[1, 1, 3, 3], &big).is_none());
 }
+
+/// Drops a NaN-filled buffer of `len` f32, so that glibc's allocator hands
+/// the same block to the next allocation of that size: an output element
+/// the operation forgot to write then reads NaN instead of a fresh zero.
+fn poison(len: usize) {
+    drop(core::hint::black_box(vec![f32::NAN; len]));
+}
+
+fn assert_finite(what: &str, case: &Case, v: &[f32]) {
+    let bad = v.iter().filter(|x| !x.is_finite()).count();
+    assert_eq!(bad, 0, "{what}: {bad} unwritten (NaN) elements, {case:?}");
+}
+
+/// Patch 5: the gradients' buffers are not zero-filled, so every element
+/// must be written. Small shapes (glibc serves them from its free lists, not
+/// fresh zeroed pages), checked for NaN and against the direct f64 loop.
+#[test]
+fn gradients_write_every_element_of_unzeroed_buffers() {
+    let cases = [
+        case([2, 8, 9, 11], 16, 1, 1, 0, 1, 1), // pointwise: GEMM overwrites dX
+        case([3, 6, 7, 5], 4, 1, 1, 0, 1, 2),   // pointwise, 2 groups
+        case([2, 5, 13, 9], 7, 3, 1, 1, 1, 1),  // col2im: zeroed per (image, group)
+        case([3, 4, 8, 8], 6, 3, 2, 1, 1, 2),   // stride 2, 2 groups
+        case([1, 6, 5, 7], 4, 1, 2, 0, 1, 1),   // 1×1 stride 2 (col2im path)
+    ];
+    for (i, c) in cases.into_iter().enumerate() {
+        let mut rng = Lcg(9000 + i as u64);
+        let opts = ConvOptions::new(c.stride, c.pad, c.dil, c.groups);
+        let w_shape = [c.c_out, c.x[1] / c.groups, c.k[0], c.k[1]];
+        let g = Geometry::new(&c.x, &w_shape, &opts).expect("valid convolution");
+        let x = rng.vec(c.x.iter().product());
+        let w = rng.vec(w_shape.iter().product());
+        let dy = rng.vec(g.batch * g.c_out * g.out_plane());
+        let [_, dx_ref, dw_ref] = naive(&c, &g, &x, &w, &dy);
+        let y_shape = [g.batch, g.c_out, g.oh, g.ow];
+        let (xt, wt, dyt) = (t4(x, c.x), t4(w, w_shape), t4(dy, y_shape));
+        poison(dx_ref.len());
+        let dx = super::conv2d_x_backward(&c.x, wt, dyt.clone(), &opts).unwrap();
+        assert_finite("x grad", &c, &values(&dx));
+        assert_close("x grad vs naive", &c, &values(&dx), &dx_ref);
+        let tasks = g.batch * g.tiles(1).len();
+        poison(super::backward::WEIGHT_GRAD_CHUNKS.min(tasks) * dw_ref.len());
+        let dw = super::conv2d_weight_backward(xt, &w_shape, dyt, &opts).unwrap();
+        assert_finite("weight grad", &c, &values(&dw));
+        assert_close("weight grad vs naive", &c, &values(&dw), &dw_ref);
+    }
+}
