@@ -187,8 +187,8 @@ fn bad_self_training_settings_are_clear_errors() {
             "unknown field `labels`",
         ),
         (
-            vec![images.clone(), "train.self_training.start_epoch=25".into()],
-            "start_epoch = 25 must be less than train.epochs = 25",
+            vec![images.clone(), "train.self_training.start_epoch=50".into()],
+            "start_epoch = 50 must be less than train.epochs = 50",
         ),
         (
             vec![
