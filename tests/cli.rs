@@ -181,7 +181,10 @@ fn config_typos_and_bad_values_exit_2_with_the_key() {
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/quickstart.toml"),
     )
     .unwrap();
-    let typo = write(&d, "typo.toml", &base.replacen("epochs = ", "epoch = ", 1));
+    // The key at the start of its line, not a comment that mentions it.
+    let typoed = base.replacen("\nepochs = ", "\nepoch = ", 1);
+    assert_ne!(typoed, base, "quickstart.toml has no `epochs = ` line");
+    let typo = write(&d, "typo.toml", &typoed);
     assert_clean_error(
         &run(&["--config", &typo]),
         &["typo.toml", "unknown field `epoch`"],
