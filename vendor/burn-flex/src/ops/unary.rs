@@ -72,7 +72,7 @@ where
 /// Below this many elements a unary op runs on the calling thread: splitting costs more
 /// than it saves. (chicktrain patch, see vendor/burn-flex/PATCH.md)
 #[cfg(feature = "rayon")]
-const PAR_UNARY_MIN: usize = 1 << 14;
+pub(crate) const PAR_UNARY_MIN: usize = 1 << 14;
 
 /// `x = op(x)` over a slice, split over the rayon pool for large slices. Every element is
 /// computed by the same scalar `op` either way, so the result is bit-identical to the
@@ -120,10 +120,11 @@ where
     src.iter().map(|&x| op(x)).collect()
 }
 
-/// Chunk length for the parallel unary loops: about four chunks per thread, so a busy
-/// thread does not hold the others up. (chicktrain patch)
+/// Chunk length for the parallel unary loops (and the f32 sigmoid kernels of patch 4):
+/// about four chunks per thread, so a busy thread does not hold the others up.
+/// (chicktrain patch)
 #[cfg(feature = "rayon")]
-fn par_chunk(n: usize) -> usize {
+pub(crate) fn par_chunk(n: usize) -> usize {
     n.div_ceil(4 * rayon::current_num_threads())
         .max(PAR_UNARY_MIN / 4)
 }

@@ -9,10 +9,6 @@ use core::mem::MaybeUninit;
 
 use super::exp::exp_f32;
 
-/// Below this many elements a kernel runs on the calling thread.
-#[cfg(feature = "rayon")]
-const PAR_MIN: usize = 1 << 14;
-
 /// `1 / (1 + e^-x)` without overflow or cancellation: with `e = e^-|x|`,
 /// `1 / (1 + e)` for x ≥ 0 and `e / (1 + e)` for x < 0 (upstream's two
 /// branches, as selects). NaN gives NaN.
@@ -60,19 +56,17 @@ pub fn sigmoid_backward_into_output(s: &mut [f32], g: &[f32]) {
 }
 
 /// Runs `f(start, chunk)` over `dst` in chunks, on the rayon pool when the
-/// slice is large and the pool has more than one thread (about four chunks
-/// per thread, so a busy thread does not hold the others up).
+/// slice is large and the pool has more than one thread, with the threshold
+/// and chunk length of flex's parallel unary ops (`ops::unary`, patch 1).
 fn par_chunks<T, F>(len: usize, dst: &mut [T], f: F)
 where
     T: Send,
     F: Fn(usize, &mut [T]) + Send + Sync,
 {
     #[cfg(feature = "rayon")]
-    if len >= PAR_MIN && rayon::current_num_threads() > 1 {
+    if len >= crate::ops::unary::PAR_UNARY_MIN && rayon::current_num_threads() > 1 {
         use rayon::prelude::*;
-        let chunk = len
-            .div_ceil(4 * rayon::current_num_threads())
-            .max(PAR_MIN / 4);
+        let chunk = crate::ops::unary::par_chunk(len);
         dst.par_chunks_mut(chunk)
             .enumerate()
             .for_each(|(i, c)| f(i * chunk, c));
