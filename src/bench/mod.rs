@@ -1,7 +1,8 @@
 //! Speed / accuracy measurements built on the rest of the crate: model variants × input
 //! sizes ([`models`]: parameters, GFLOPs, latency, training throughput, peak memory,
-//! checkpoint AP), flex vs tract inference latency ([`engines`]) and the training loader's
-//! rate alone ([`loader`]). Their parts: variant names ([`variant`]), one row's measurement
+//! checkpoint AP), flex vs tract inference latency ([`engines`]), the training loader's
+//! rate alone ([`loader`]) and flex's convolution engine against the path it replaces
+//! ([`convs`], over the models' shapes in [`conv_shapes`]). Their parts: variant names ([`variant`]), one row's measurement
 //! ([`measure`]) in a fresh child process ([`worker`]), test AP of trained models
 //! ([`accuracy`]), the effort flags ([`effort`]) and the CSV / markdown / PNG report ([`report`]), which goes through
 //! [`crate::eval::report`] and [`crate::eval::plots`]. The studies that train (the
@@ -9,6 +10,8 @@
 //! times its ablation through these parts.
 
 pub mod accuracy;
+pub mod conv_shapes;
+pub mod convs;
 pub mod effort;
 pub mod engines;
 pub mod loader;

@@ -1,5 +1,5 @@
-//! The measurement commands: `bench models`, `bench engines`, `bench loader` and the
-//! hidden per-row `bench model-worker`. The training studies (`sweep`, `bench ablation`,
+//! The measurement commands: `bench models`, `bench engines`, `bench loader`, `bench
+//! convs` and the hidden per-row `bench model-worker`. The training studies (`sweep`, `bench ablation`,
 //! `bench transfer`) take their flags straight from `experiments/`, whose option structs
 //! derive clap's `Args`. Defaults that depend on several flags at once (which grid, which
 //! folder) are decided here, not in `main`.
@@ -8,6 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::bench::convs::{self, ConvsArgs};
 use crate::bench::effort::EffortFlags;
 use crate::bench::engines::bench_engines;
 use crate::bench::measure::Effort;
@@ -117,6 +118,41 @@ pub struct LoaderRequest {
 pub fn loader_cmd(r: &LoaderRequest) -> Result<String> {
     let cfg = config::load(&r.config, &r.overrides)?;
     Ok(crate::bench::loader::bench_loader(&cfg, r.batches, r.threads)?.report(&r.config))
+}
+
+/// `bench convs` as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct ConvsRequest {
+    /// Comma-separated input sizes, multiples of 64.
+    #[arg(long, default_value = "256,640")]
+    pub sizes: String,
+    /// Comma-separated models: yolo11n-seg, maskrcnn-r18.
+    #[arg(long, default_value = "yolo11n-seg,maskrcnn-r18")]
+    pub models: String,
+    /// Images per convolution call.
+    #[arg(long, default_value_t = 1)]
+    pub batch: usize,
+    /// Interleaved repeats per pass (the median is reported).
+    #[arg(long, default_value_t = 10)]
+    pub repeats: usize,
+    /// Clock in GHz for the peak FLOP/s (default: the first `cpu MHz` of /proc/cpuinfo).
+    #[arg(long)]
+    pub ghz: Option<f64>,
+    /// Folder for convs.csv and convs.md.
+    #[arg(long, default_value = "bench/results/convs")]
+    pub out: PathBuf,
+}
+
+/// `chicktrain bench convs`: the markdown report (also written under `--out`).
+pub fn convs_cmd(r: &ConvsRequest) -> Result<String> {
+    let args = ConvsArgs {
+        sizes: parse_sizes(&r.sizes)?,
+        models: r.models.split(',').map(|m| m.trim().to_string()).collect(),
+        batch: r.batch,
+        repeats: r.repeats,
+        ghz: r.ghz,
+    };
+    convs::run(&args, &r.out)
 }
 
 /// `bench model-worker` (hidden): the row `bench models` asks a fresh process for.

@@ -5,7 +5,7 @@
 
 use clap::{Args, Parser, Subcommand};
 
-use super::bench::{self as bench_cmd, LoaderRequest, ModelsRequest, WorkerRequest};
+use super::bench::{self as bench_cmd, ConvsRequest, LoaderRequest, ModelsRequest, WorkerRequest};
 use super::bench::{bench_engines_cmd, EnginesRequest};
 use super::data::{
     self, BenchCocoRequest, BenchRenderRequest, Coco2yoloRequest, CocoEvalRequest, LabelmeRequest,
@@ -70,7 +70,7 @@ pub enum Command {
     /// Measure: `bench models` (model variants × sizes), `bench engines` (flex vs tract),
     /// `bench ablation` (what the scene needs), `bench transfer` (what transfers to an
     /// external set), `bench render` (the renderer), `bench loader` (the training loader),
-    /// `bench coco` (the COCO evaluator).
+    /// `bench coco` (the COCO evaluator), `bench convs` (flex's convolutions).
     Bench {
         #[command(subcommand)]
         what: BenchWhat,
@@ -112,6 +112,10 @@ pub enum BenchWhat {
     Loader(LoaderRequest),
     /// Time load + evaluate + accumulate (bbox and segm) on a GT/DT pair.
     Coco(BenchCocoRequest),
+    /// Every convolution shape of YOLO11n-seg and Mask R-CNN R18 timed alone on flex: the
+    /// convolution engine beside the path it replaced, forward and both gradients, in
+    /// GFLOP/s and % of the machine's peak (issue 37).
+    Convs(ConvsRequest),
 }
 
 #[derive(Subcommand)]
@@ -161,6 +165,7 @@ impl BenchWhat {
             BenchWhat::Render(r) => data::bench_render(&r),
             BenchWhat::Loader(r) => bench_cmd::loader_cmd(&r),
             BenchWhat::Coco(r) => data::bench_coco(&r),
+            BenchWhat::Convs(r) => bench_cmd::convs_cmd(&r),
         }
     }
 }
