@@ -288,10 +288,16 @@ impl C3k2 {
 
     /// # Shapes
     /// - `x`: `[B, c_in, H, W]` → `[B, c_out, H, W]`
+    ///
+    /// ultralytics splits `y` with `chunk(2, 1)` and concatenates both halves first; they
+    /// are adjacent there, so `y` enters the concatenation whole and only the second half
+    /// is sliced out for the inner blocks. Same values, one slice instead of two: Burn's
+    /// gradient of a slice is a zero tensor of the input's shape with the slice's gradient
+    /// written in, so each slice costs a fill of `y`'s size and a copy in the backward.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let y = self.cv1.forward(x);
-        let mut parts = y.chunk(2, 1);
-        let mut last = parts[1].clone();
+        let mut last = y.clone().narrow(1, self.c, self.c);
+        let mut parts = vec![y];
         for block in &self.m {
             last = block.forward(last);
             parts.push(last.clone());
@@ -457,6 +463,122 @@ mod tests {
             [2, 16, 8, 8]
         );
         assert_eq!(Proto::new(16, 8, 4, &d).forward(x).dims(), [2, 4, 16, 16]);
+    }
+
+    /// C3k2 as ultralytics writes it (`y.chunk(2, 1)`, both halves into the concatenation):
+    /// the reference for the single-slice [`C3k2::forward`].
+    fn c3k2_chunked(m: &C3k2, x: Tensor<4>) -> Tensor<4> {
+        let mut parts = m.cv1.forward(x).chunk(2, 1);
+        let mut last = parts[1].clone();
+        for block in &m.m {
+            last = block.forward(last);
+            parts.push(last.clone());
+        }
+        m.cv2.forward(Tensor::cat(parts, 1))
+    }
+
+    /// The single-slice split gives the chunked reference's output and gradients (input,
+    /// `cv1`'s and the first inner block's weights), for Bottleneck and C3k inner blocks
+    /// and one and two of them: a wrong half, order or width changes all three.
+    #[test]
+    fn c3k2_split_matches_the_chunked_reference() {
+        use burn::tensor::Distribution;
+        let ad = Device::flex().autodiff();
+        ad.seed(37);
+        for (c_in, c_out, n, c3k, e) in [(8, 12, 1, false, 0.25), (6, 16, 2, true, 0.5)] {
+            let m = C3k2::new(c_in, c_out, n, c3k, e, &ad);
+            let x = Tensor::<4>::random([2, c_in, 6, 10], Distribution::Normal(0.0, 1.0), &ad);
+            let r = Tensor::<4>::random([2, c_out, 6, 10], Distribution::Normal(0.0, 1.0), &ad);
+            let run = |f: &dyn Fn(Tensor<4>) -> Tensor<4>| {
+                let xg = x.clone().detach().require_grad();
+                let out = f(xg.clone());
+                let g = (out.clone() * r.clone()).sum().backward();
+                let first = match &m.m[0] {
+                    C3k2Inner::Bottleneck(b) => b.cv1.conv.weight.val(),
+                    C3k2Inner::C3k(k) => k.cv1.conv.weight.val(),
+                };
+                [
+                    out,
+                    xg.grad(&g).unwrap(),
+                    m.cv1.conv.weight.val().grad(&g).unwrap(),
+                    first.grad(&g).unwrap(),
+                ]
+                .map(crate::util::tensor::to_host)
+            };
+            let new = run(&|x| m.forward(x));
+            let old = run(&|x| c3k2_chunked(&m, x));
+            for (what, (a, b)) in ["output", "x grad", "cv1 grad", "inner grad"]
+                .iter()
+                .zip(new.iter().zip(&old))
+            {
+                let scale = b.iter().fold(0f32, |s, v| s.max(v.abs()));
+                assert!(scale > 0.0, "{what}: all zero");
+                let err = a.iter().zip(b).fold(0f32, |s, (u, v)| s.max((u - v).abs()));
+                assert!(
+                    err <= 1e-6 * scale,
+                    "{what}: max error {err}, scale {scale}"
+                );
+            }
+        }
+    }
+
+    /// Training step (forward + backward) of YOLO11n-seg's eight C3k2 blocks at batch 8 /
+    /// 224 px, the chunked reference and the single-slice split interleaved (old, new, …),
+    /// median of 15 each. `RAYON_NUM_THREADS=1 cargo test --release --lib c3k2_split_bench
+    /// -- --ignored --nocapture`; output in `bench/results/convs/c3k2_split_bench.md`.
+    #[test]
+    #[ignore = "timing, run by hand"]
+    fn c3k2_split_bench() {
+        use burn::tensor::Distribution;
+        use std::time::Instant;
+        let ad = Device::flex().autodiff();
+        // (name, c_in, c_out, c3k, e, side at 224 px): backbone l2 l4 l6 l8, neck
+        // td_p4 td_p3 bu_p4 bu_p5 (`Backbone::new`, `Neck::new` at scale n).
+        let blocks = [
+            ("l2", 32, 64, false, 0.25, 56),
+            ("l4", 64, 128, false, 0.25, 28),
+            ("l6", 128, 128, true, 0.5, 14),
+            ("l8", 256, 256, true, 0.5, 7),
+            ("td_p4", 384, 128, false, 0.5, 14),
+            ("td_p3", 256, 64, false, 0.5, 28),
+            ("bu_p4", 192, 128, false, 0.5, 14),
+            ("bu_p5", 384, 256, true, 0.5, 7),
+        ];
+        println!("| block | in | chunked ms | single slice ms | chunked ÷ single |");
+        println!("|---|---|---|---|---|");
+        let (mut total_old, mut total_new) = (0.0, 0.0);
+        for (name, c_in, c_out, c3k, e, hw) in blocks {
+            let m = C3k2::new(c_in, c_out, 1, c3k, e, &ad);
+            let x = Tensor::<4>::random([8, c_in, hw, hw], Distribution::Normal(0.0, 1.0), &ad);
+            let step = |f: &dyn Fn(Tensor<4>) -> Tensor<4>| {
+                let t = Instant::now();
+                let g = f(x.clone().require_grad()).sum().backward();
+                drop(g);
+                t.elapsed().as_secs_f64() * 1e3
+            };
+            let (mut old, mut new) = (Vec::new(), Vec::new());
+            for i in 0..17 {
+                let (o, n) = (step(&|x| c3k2_chunked(&m, x)), step(&|x| m.forward(x)));
+                if i >= 2 {
+                    old.push(o);
+                    new.push(n);
+                }
+            }
+            let median = |v: &mut Vec<f64>| {
+                v.sort_by(f64::total_cmp);
+                v[v.len() / 2]
+            };
+            let (o, n) = (median(&mut old), median(&mut new));
+            (total_old, total_new) = (total_old + o, total_new + n);
+            println!(
+                "| {name} | 8×{c_in}×{hw}×{hw} | {o:.2} | {n:.2} | {:.3} |",
+                o / n
+            );
+        }
+        println!(
+            "| all eight | | {total_old:.2} | {total_new:.2} | {:.3} |",
+            total_old / total_new
+        );
     }
 
     #[test]
