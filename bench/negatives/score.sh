@@ -10,8 +10,5 @@ mkdir -p "$out"
 "$ct" eval --checkpoint "$ckpt" --split test --json > "$out/home_test.json"
 "$ct" eval --checkpoint "$ckpt" --data bench/crossdomain/crossdomain.toml --split test --json > "$out/crossdomain.json"
 "$ct" eval --checkpoint "$ckpt" --data bench/crossdomain2/crossdomain2.toml --split test --json > "$out/crossdomain2.json"
-for conf in 0.25 0.5; do
-  "$ct" predict --checkpoint "$ckpt" --input bench/negatives --out "$out/pred_$conf" --conf "$conf" > /dev/null
-done
-python3 bench/negatives/count.py "$out/pred_0.25/images.json" "$out/pred_0.5/images.json" > "$out/negatives.txt"
+bench/negatives/detections.sh "$ct" "$ckpt" "$out"
 cat "$out/negatives.txt"

@@ -14,10 +14,12 @@
 # optimiser steps. ARMS="ctrl xd xd2 fx fx2" (the default) picks the second-stage arms.
 # Each is scored zero-shot without TTA on the test halves (ids 61-120 of the Blender set,
 # 51-100 of the Mitsuba set; labels of the unlabeled halves are never read), best.bpk
-# and last.bpk. The second-stage runs go JOBS at a time (default 2) at one thread each;
+# and last.bpk, and each best.bpk on the ten carcass-free photos of bench/negatives/
+# (bench/negatives/detections.sh). The second-stage runs go JOBS at a time (default 2) at one thread each;
 # training is deterministic, so the load changes the times, not the metrics. CACHE=DIR
 # shares a render cache between runs. Writes RESULTS/<arm>_s<S>_<ckpt>_<set>.json
-# (eval --json), each run's metrics.jsonl / self_training.jsonl / wall time, and
+# (eval --json), RESULTS/<arm>_s<S>_negatives.txt (detections above 0.25 and 0.5), each
+# run's metrics.jsonl / self_training.jsonl / wall time, and
 # RESULTS/summary.md.
 #
 #   bench/selftrain/after_main.sh target/release/chicktrain runs/after_main \
@@ -92,6 +94,11 @@ for S in "$@"; do
   for arm in main ctrl xd xd2 fx fx2; do
     run=$OUT/${arm}_s$S
     [ -f "$run/metrics.jsonl" ] || continue
+    neg=$RESULTS/${arm}_s${S}_negatives.txt
+    if [ ! -f "$neg" ]; then
+      RAYON_NUM_THREADS=2 bench/negatives/detections.sh "$BIN" "$run/best.bpk" "$run/negatives"
+      cp "$run/negatives/negatives.txt" "$neg"
+    fi
     cp "$run/metrics.jsonl" "$RESULTS/${arm}_s${S}_metrics.jsonl"
     [ -f "$run.wall_s" ] && cp "$run.wall_s" "$RESULTS/${arm}_s${S}.wall_s"
     [ -f "$run/self_training.jsonl" ] && cp "$run/self_training.jsonl" "$RESULTS/${arm}_s${S}_self_training.jsonl"

@@ -4,7 +4,8 @@
 of renders alone (ctrl) and of 700 more steps with that set's unlabeled half, labelled by
 the run's EMA model (xd / xd2) or once by the main job's best.bpk (fx / fx2), per seed,
 with means ± sample std and the paired differences self-training minus ctrl; then the
-pseudo-instances of each labelling and the wall time of each run. Missing files show as
+pseudo-instances of each labelling, the detections on bench/negatives/ and the wall
+time of each run. Missing files show as
 "–". Standard library only:
     python3 bench/selftrain/summarize_after_main.py RESULTS SEED...
 """
@@ -78,33 +79,29 @@ def labels(res, seeds):
             print(f"| {a}_s{s} | {eps} | {ins} |")
 
 
-def negatives(res, seeds):
-    """negatives.sh's counts: detections above 0.25 / 0.5 summed over the ten photos."""
-    print("\n## Detections on the ten carcass-free photos (best.bpk; > 0.25 / > 0.5)\n")
+def per_arm(title, seeds, cell):
+    """A table of one cell per seed and arm; cell(arm, seed) gives its text or None."""
+    print(f"\n## {title}\n")
     print("| seed | " + " | ".join(ARMS) + " |")
     print("|---" * (len(ARMS) + 1) + "|")
     for s in seeds:
-        row = []
-        for a in ARMS:
-            p = f"{res}/{a}_s{s}_negatives.txt"
-            if not os.path.exists(p):
-                row.append("–")
-                continue
-            totals = [l.split("total ")[1].split()[0] for l in open(p) if "total " in l]
-            row.append(" / ".join(totals))
-        print(f"| {s} | " + " | ".join(row) + " |")
+        print(f"| {s} | " + " | ".join(cell(a, s) or "–" for a in ARMS) + " |")
+
+
+def read_if(path, parse):
+    return parse(open(path)) if os.path.exists(path) else None
+
+
+def negatives(res, seeds):
+    """after_main.sh's negatives counts: detections above 0.25 / 0.5 over the ten photos."""
+    per_arm("Detections on the ten carcass-free photos (best.bpk; > 0.25 / > 0.5)", seeds,
+            lambda a, s: read_if(f"{res}/{a}_s{s}_negatives.txt", lambda f: " / ".join(
+                l.split("total ")[1].split()[0] for l in f if "total " in l)))
 
 
 def walls(res, seeds):
-    print("\n## Wall time of each run (s; one thread, runs side by side, so a scale only)\n")
-    print("| seed | " + " | ".join(ARMS) + " |")
-    print("|---" * (len(ARMS) + 1) + "|")
-    for s in seeds:
-        row = []
-        for a in ARMS:
-            p = f"{res}/{a}_s{s}.wall_s"
-            row.append(open(p).read().strip() if os.path.exists(p) else "–")
-        print(f"| {s} | " + " | ".join(row) + " |")
+    per_arm("Wall time of each run (s; one thread, runs side by side, so a scale only)", seeds,
+            lambda a, s: read_if(f"{res}/{a}_s{s}.wall_s", lambda f: f.read().strip()))
 
 
 def main():
