@@ -23,6 +23,7 @@ use burn_flex::ops::conv_engine::{self, reference, Geometry};
 use burn_flex::FlexTensor;
 
 use super::conv_shapes::{maskrcnn_r18, yolo11n_seg, ConvShape};
+use super::peak::Peak;
 use crate::util::write_atomic;
 
 /// Seed of the benchmark's input values (they do not affect the timing).
@@ -30,61 +31,6 @@ const SEED: u64 = 37;
 
 /// The three passes timed per shape.
 const PASSES: [&str; 3] = ["forward", "x grad", "weight grad"];
-
-/// Peak f32 FLOP/s of this machine for the GEMM kernels flex uses:
-/// cores × GHz × f32 lanes per FMA × 2 FMA units per core × 2 FLOPs per FMA.
-#[derive(Debug, Clone, Copy)]
-pub struct Peak {
-    pub cores: usize,
-    pub ghz: f64,
-    pub lanes: usize,
-}
-
-impl Peak {
-    /// Cores from the OS, GHz from `ghz` or else the first `cpu MHz` of `/proc/cpuinfo`
-    /// (the nominal clock; turbo would raise the true peak), lanes 8 where AVX2 + FMA are
-    /// present (the widest kernels of the `gemm` crate as flex builds it: without its
-    /// `x86-v4` feature it does not use AVX-512 even where the CPU has it), else 4.
-    pub fn detect(ghz: Option<f64>) -> Result<Self> {
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let ghz = match ghz {
-            Some(g) if g.is_finite() && g > 0.0 => g,
-            Some(g) => bail!("bench convs: --ghz must be a positive number (got {g})"),
-            None => cpuinfo_ghz()
-                .context("bench convs: no `cpu MHz` in /proc/cpuinfo; give the clock with --ghz")?,
-        };
-        #[cfg(target_arch = "x86_64")]
-        let lanes = if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-            8
-        } else {
-            4
-        };
-        #[cfg(not(target_arch = "x86_64"))]
-        let lanes = 4;
-        Ok(Self { cores, ghz, lanes })
-    }
-
-    pub fn gflops(&self) -> f64 {
-        self.cores as f64 * self.ghz * self.lanes as f64 * 2.0 * 2.0
-    }
-
-    pub fn describe(&self) -> String {
-        format!(
-            "{} cores × {:.2} GHz × {} f32 lanes × 2 FMA units × 2 FLOPs = {:.1} GFLOP/s",
-            self.cores,
-            self.ghz,
-            self.lanes,
-            self.gflops()
-        )
-    }
-}
-
-fn cpuinfo_ghz() -> Option<f64> {
-    let text = std::fs::read_to_string("/proc/cpuinfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("cpu MHz"))?;
-    let mhz: f64 = line.split(':').nth(1)?.trim().parse().ok()?;
-    (mhz > 0.0).then_some(mhz / 1e3)
-}
 
 /// One (shape, pass): median milliseconds of the old path and of the engine.
 #[derive(Debug, Clone)]
@@ -386,21 +332,6 @@ mod tests {
         let mut a = args(vec![64], &["yolo11n-seg"], 1);
         a.ghz = Some(-1.0);
         assert!(run(&a, out).unwrap_err().to_string().contains("--ghz"));
-    }
-
-    #[test]
-    fn peak_is_the_product_of_its_factors() {
-        let p = Peak {
-            cores: 2,
-            ghz: 2.5,
-            lanes: 8,
-        };
-        assert_eq!(p.gflops(), 160.0);
-        assert!(
-            p.describe().ends_with("= 160.0 GFLOP/s"),
-            "{}",
-            p.describe()
-        );
     }
 
     #[test]

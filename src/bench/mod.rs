@@ -2,7 +2,7 @@
 //! sizes ([`models`]: parameters, GFLOPs, latency, training throughput, peak memory,
 //! checkpoint AP), flex vs tract inference latency ([`engines`]), the training loader's
 //! rate alone ([`loader`]) and flex's convolution engine against the path it replaces
-//! ([`convs`], over the models' shapes in [`conv_shapes`]). Their parts: variant names ([`variant`]), one row's measurement
+//! ([`convs`], over the models' shapes in [`conv_shapes`], against the [`peak`] FLOP/s). Their parts: variant names ([`variant`]), one row's measurement
 //! ([`measure`]) in a fresh child process ([`worker`]), test AP of trained models
 //! ([`accuracy`]), the effort flags ([`effort`]) and the CSV / markdown / PNG report ([`report`]), which goes through
 //! [`crate::eval::report`] and [`crate::eval::plots`]. The studies that train (the
@@ -17,6 +17,7 @@ pub mod engines;
 pub mod loader;
 pub mod measure;
 pub mod models;
+pub mod peak;
 pub mod report;
 pub mod variant;
 pub mod worker;

@@ -174,3 +174,55 @@ fn bench_yolo11n_seg_shapes() {
         }
     }
 }
+
+/// Patch 6 alone: the weight gradient with the contiguous panel (before) and
+/// the padded one (after), interleaved, on the same shapes at batch 1 and 8.
+/// `cargo test --release --lib conv_engine::bench::bench_weight_panel -- --ignored --nocapture`
+#[test]
+#[ignore = "benchmark: minutes; run with --ignored --nocapture"]
+fn bench_weight_panel_layouts() {
+    use super::backward::{WeightPanel, weight_grad_with};
+    println!("| batch | size | shape | ×n | contiguous ms | padded ms | ratio |");
+    println!("|---|---|---|---|---|---|---|");
+    for (batch, size) in [(1usize, 256usize), (1, 640), (8, 256)] {
+        let (mut before, mut after) = (0.0f64, 0.0f64);
+        for &(c_in, c_out, k, s, groups, level, count) in &SHAPES {
+            let hw = size >> level;
+            let opts = ConvOptions::new([s; 2], [k / 2; 2], [1, 1], groups);
+            let x_shape = [batch, c_in, hw, hw];
+            let w_shape = [c_out, c_in / groups, k, k];
+            let g = Geometry::new(&x_shape, &w_shape, &opts).unwrap();
+            let mut seed = 37;
+            let x = tensor(x_shape, &mut seed);
+            let dy = tensor([batch, c_out, g.oh, g.ow], &mut seed);
+            let (a, b) = interleaved(
+                &|| {
+                    drop(weight_grad_with::<f32>(
+                        &g,
+                        x.clone(),
+                        dy.clone(),
+                        WeightPanel::Contiguous,
+                    ))
+                },
+                &|| {
+                    drop(weight_grad_with::<f32>(
+                        &g,
+                        x.clone(),
+                        dy.clone(),
+                        WeightPanel::Padded,
+                    ))
+                },
+            );
+            before += a * count as f64;
+            after += b * count as f64;
+            println!(
+                "| {batch} | {size} | {c_in}→{c_out} {k}×{k} s{s} g{groups} @{hw} | {count} | {a:.3} | {b:.3} | {:.2} |",
+                a / b
+            );
+        }
+        println!(
+            "| {batch} | {size} | TOTAL | | {before:.2} | {after:.2} | {:.2} |",
+            before / after
+        );
+    }
+}

@@ -70,7 +70,7 @@ unsafe fn tile<T: Elem>(
         (x_group[r0 * g.ow..].as_ptr(), g.in_plane())
     } else {
         panel.resize(k * n, T::ZERO);
-        im2col_rows(g, x_group, r0, r1, &mut panel[..k * n]);
+        im2col_rows(g, x_group, r0, r1, &mut panel[..k * n], n);
         (panel.as_ptr(), n)
     };
     let out_off = (b * g.c_out + grp * g.mpg) * g.out_plane() + r0 * g.ow;

@@ -13,23 +13,27 @@
 use super::Elem;
 use super::geometry::Geometry;
 
-/// Fill `panel` (`[g.k(), (r1 - r0) * g.ow]`) from `x_group`, the `g.cpg`
-/// input planes of one image and group, for output rows `r0..r1`.
+/// Fill `panel` (`[g.k(), (r1 - r0) * g.ow]`, row `r` starting at `r * ld`,
+/// `ld ≥ (r1 - r0) * g.ow`; entries between a row's end and the next row's
+/// start are left as they are) from `x_group`, the `g.cpg` input planes of one
+/// image and group, for output rows `r0..r1`.
 pub(crate) fn im2col_rows<T: Elem>(
     g: &Geometry,
     x_group: &[T],
     r0: usize,
     r1: usize,
     panel: &mut [T],
+    ld: usize,
 ) {
     let n = (r1 - r0) * g.ow;
+    debug_assert!(ld >= n);
     let plane = g.in_plane();
     for c in 0..g.cpg {
         let x_plane = &x_group[c * plane..(c + 1) * plane];
         for i in 0..g.kh {
             for j in 0..g.kw {
                 let row_idx = (c * g.kh + i) * g.kw + j;
-                let row = &mut panel[row_idx * n..(row_idx + 1) * n];
+                let row = &mut panel[row_idx * ld..row_idx * ld + n];
                 let (lo, hi) = g.valid_cols(j);
                 for (t, r) in (r0..r1).enumerate() {
                     let seg = &mut row[t * g.ow..(t + 1) * g.ow];
@@ -99,4 +103,16 @@ pub(crate) fn col2im_rows<T: Elem>(
             }
         }
     }
+}
+
+/// Row stride of the weight gradient's panel for tiles of `n` pixels: `n`
+/// plus 16 elements. The weight gradient's GEMM reads the panel transposed
+/// (its pixels are the GEMM's depth), i.e. as a column-major right-hand side,
+/// which the `gemm` crate does not repack for small left-hand sides; with a
+/// power-of-two stride (tiles are often 256 or 512 pixels) the columns it
+/// reads side by side fall into the same cache sets. 16 more elements break that
+/// and keep rows 64-byte aligned: the GEMM alone ran 1.3–2× faster on
+/// YOLO11n-seg's 3×3 shapes (PATCH.md, patch 6).
+pub(crate) fn weight_panel_ld(n: usize) -> usize {
+    n + 16
 }

@@ -228,6 +228,41 @@ fn engine_matches_reference_on_random_shapes() {
     }
 }
 
+/// Patch 6: the padded panel changes where the
+/// weight gradient's GEMM reads, not what it adds or in which order, so the
+/// two layouts give the same bits.
+#[test]
+fn weight_grad_panel_layouts_are_bit_identical() {
+    use super::backward::{WeightPanel, weight_grad_with};
+    let cases = [
+        case([1, 8, 9, 11], 16, 1, 1, 0, 1, 1), // 1×1 stride 1: in place either way
+        case([8, 6, 7, 5], 4, 1, 1, 0, 1, 2),   // 1×1 grouped, batch 8
+        case([2, 16, 32, 32], 16, 3, 1, 1, 1, 1), // 512-pixel tiles: power-of-two stride
+        case([2, 32, 32, 32], 32, 1, 1, 0, 1, 1), // 1×1 on a 1024-element plane
+        case([8, 4, 8, 8], 8, 3, 2, 1, 1, 1),   // stride 2, batch 8
+        case([2, 8, 9, 9], 4, 3, 1, 2, 2, 2),   // dilation, groups
+        case([1, 8, 60, 20], 8, 3, 1, 1, 1, 1), // several rows per tile
+    ];
+    for (i, c) in cases.into_iter().enumerate() {
+        let mut rng = Lcg(7000 + i as u64);
+        let opts = ConvOptions::new(c.stride, c.pad, c.dil, c.groups);
+        let w_shape = [c.c_out, c.x[1] / c.groups, c.k[0], c.k[1]];
+        let g = Geometry::new(&c.x, &w_shape, &opts).unwrap();
+        let x = t4(rng.vec(c.x.iter().product()), c.x);
+        let dy = t4(
+            rng.vec(g.batch * g.c_out * g.out_plane()),
+            [g.batch, g.c_out, g.oh, g.ow],
+        );
+        let padded = weight_grad_with::<f32>(&g, x.clone(), dy.clone(), WeightPanel::Padded);
+        let contiguous = weight_grad_with::<f32>(&g, x, dy, WeightPanel::Contiguous);
+        let same = padded
+            .iter()
+            .zip(&contiguous)
+            .all(|(a, b)| a.to_bits() == b.to_bits());
+        assert!(same && padded.len() == contiguous.len(), "{c:?}");
+    }
+}
+
 #[test]
 fn geometry_rejects_asymmetric_padding_and_bad_channels() {
     let asym = ConvOptions::new_with_padding([1, 1], [(0, 1), (1, 1)], [1, 1], 1);
