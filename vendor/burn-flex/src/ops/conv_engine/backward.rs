@@ -152,6 +152,7 @@ pub(crate) enum WeightPanel {
     Padded,
     /// Row stride `n`: the layout before patch 6, kept so tests and the bench can
     /// compare the two (same sums, same order).
+    #[cfg_attr(not(test), allow(dead_code))]
     Contiguous,
 }
 

@@ -226,3 +226,60 @@ fn bench_weight_panel_layouts() {
         );
     }
 }
+
+/// Patch 7 alone: every im2col panel of a layer (all tiles of all images, as
+/// the forward pass builds them) with the loop as it was and with the
+/// stride-1 block copy, interleaved, on the same shapes at batch 1 and 8.
+/// `cargo test --release --lib conv_engine::bench::bench_im2col -- --ignored --nocapture`
+#[test]
+#[ignore = "benchmark: minutes; run with --ignored --nocapture"]
+fn bench_im2col_block_copy() {
+    use super::panel::im2col_rows_with;
+    println!("| batch | size | shape | ×n | before ms | block copy ms | ratio |");
+    println!("|---|---|---|---|---|---|---|");
+    for (batch, size) in [(1usize, 256usize), (1, 640), (8, 256)] {
+        let (mut before, mut after) = (0.0f64, 0.0f64);
+        for &(c_in, c_out, k, s, groups, level, count) in &SHAPES {
+            let hw = size >> level;
+            let opts = ConvOptions::new([s; 2], [k / 2; 2], [1, 1], groups);
+            let x_shape = [batch, c_in, hw, hw];
+            let w_shape = [c_out, c_in / groups, k, k];
+            let g = Geometry::new(&x_shape, &w_shape, &opts).unwrap();
+            if g.is_pointwise() || g.is_depthwise() {
+                continue; // no panel in the forward pass
+            }
+            let mut seed = 37;
+            let x = tensor(x_shape, &mut seed);
+            let xs: &[f32] = x.storage();
+            let tiles = g.tiles(1);
+            let mut panel = alloc::vec![0.0f32; g.k() * tiles.iter().map(|t| (t.1 - t.0) * g.ow).max().unwrap()];
+            let mut build = |fast: bool| {
+                for b in 0..batch {
+                    for grp in 0..g.groups {
+                        let off = (b * g.c_in + grp * g.cpg) * g.in_plane();
+                        let x_group = &xs[off..off + g.cpg * g.in_plane()];
+                        for &(r0, r1) in &tiles {
+                            let n = (r1 - r0) * g.ow;
+                            im2col_rows_with(&g, x_group, r0, r1, &mut panel[..g.k() * n], n, fast);
+                        }
+                    }
+                }
+                core::hint::black_box(&panel);
+            };
+            let cell = core::cell::RefCell::new(&mut build);
+            let (a, b) = interleaved(&|| (cell.borrow_mut())(false), &|| {
+                (cell.borrow_mut())(true)
+            });
+            before += a * count as f64;
+            after += b * count as f64;
+            println!(
+                "| {batch} | {size} | {c_in}→{c_out} {k}×{k} s{s} g{groups} @{hw} | {count} | {a:.3} | {b:.3} | {:.2} |",
+                a / b
+            );
+        }
+        println!(
+            "| {batch} | {size} | TOTAL | | {before:.2} | {after:.2} | {:.2} |",
+            before / after
+        );
+    }
+}

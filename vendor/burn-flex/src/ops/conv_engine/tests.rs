@@ -263,6 +263,76 @@ fn weight_grad_panel_layouts_are_bit_identical() {
     }
 }
 
+/// Patch 7: the stride-1 block copy builds the same panel as the loop before
+/// it, on listed shapes and 60 seeded random ones (every tile of every image;
+/// a third of them stride 2, which must keep the loop).
+#[test]
+fn fast_panels_equal_the_row_loop() {
+    use super::panel::im2col_rows_with;
+    let mut rng = Lcg(91);
+    let mut cases = vec![
+        case([1, 5, 13, 9], 7, 3, 1, 1, 1, 1),
+        case([2, 8, 9, 9], 4, 3, 1, 2, 2, 2),
+        case([1, 8, 60, 20], 8, 3, 1, 1, 1, 1),
+        case([1, 2, 1, 9], 3, 3, 1, 1, 1, 1),
+        case([1, 3, 11, 11], 5, 5, 1, 2, 1, 1),
+        case([8, 4, 8, 8], 8, 3, 2, 1, 1, 1), // stride 2: the strided gather
+        case([1, 3, 11, 11], 5, 5, 2, 2, 1, 1), // 5×5 stride 2
+    ];
+    for _ in 0..60 {
+        let k = [1, 3, 3, 5][rng.below(4)];
+        let dil = 1 + rng.below(2);
+        // Mostly "same" padding (the block copy's case), sometimes not.
+        let pad = if rng.below(4) == 0 {
+            rng.below(3)
+        } else {
+            dil * (k / 2)
+        };
+        let (h, w) = (1 + rng.below(12), 1 + rng.below(12));
+        cases.push(case(
+            [1 + rng.below(2), 1 + rng.below(4), h, w],
+            2,
+            k,
+            1,
+            pad,
+            dil,
+            1,
+        ));
+    }
+    let mut fast_hits = 0;
+    for (ci, c) in cases.into_iter().enumerate() {
+        let opts = ConvOptions::new(c.stride, c.pad, c.dil, c.groups);
+        let w_shape = [c.c_out, c.x[1] / c.groups, c.k[0], c.k[1]];
+        let Some(g) = Geometry::new(&c.x, &w_shape, &opts) else {
+            continue; // a kernel larger than the padded input
+        };
+        fast_hits += usize::from(g.ow == g.w && g.sw == 1);
+        let x = Lcg(ci as u64).vec(c.x.iter().product());
+        for b in 0..g.batch {
+            let x_group = &x[b * g.c_in * g.in_plane()..][..g.cpg * g.in_plane()];
+            for (r0, r1) in g.tiles(1).into_iter().chain(g.tiles(4)) {
+                let n = (r1 - r0) * g.ow;
+                let ld = n + 3;
+                let mut a = vec![f32::NAN; g.k() * ld];
+                let mut bl = vec![f32::NAN; g.k() * ld];
+                im2col_rows_with(&g, x_group, r0, r1, &mut a, ld, false);
+                im2col_rows_with(&g, x_group, r0, r1, &mut bl, ld, true);
+                for row in 0..g.k() {
+                    let (ra, rb) = (&a[row * ld..row * ld + n], &bl[row * ld..row * ld + n]);
+                    assert!(
+                        ra.iter().zip(rb).all(|(p, q)| p.to_bits() == q.to_bits()),
+                        "{c:?} rows {r0}..{r1} panel row {row}"
+                    );
+                }
+            }
+        }
+    }
+    assert!(
+        fast_hits >= 20,
+        "only {fast_hits} cases took the block copy"
+    );
+}
+
 #[test]
 fn geometry_rejects_asymmetric_padding_and_bad_channels() {
     let asym = ConvOptions::new_with_padding([1, 1], [(0, 1), (1, 1)], [1, 1], 1);
