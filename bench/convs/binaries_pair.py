@@ -1,6 +1,6 @@
 """The ratio table of bench/convs/binaries_pair.sh: OLD ÷ NEW per model, size and pass of
 `bench convs` (each side the median of its two rounds, shapes weighted by their layer
-count, the path flex dispatches), ONNX Runtime beside NEW where ort_convs.md exists, and
+count, the path flex dispatches), ONNX Runtime beside NEW where ort_convs.csv exists, and
 `bench models` latency / training img/s. Prints markdown.
 
     python3 bench/convs/binaries_pair.py OUT
@@ -12,12 +12,7 @@ import statistics
 import sys
 from collections import defaultdict
 
-
-def used_ms(r):
-    """What flex runs: the engine, except forwards that dispatch keeps on the old path."""
-    if r["pass"] == "forward" and r["engine_forward"] != "true":
-        return float(r["old_ms"])
-    return float(r["new_ms"])
+from convs_csv import used_ms
 
 
 def totals(path):
@@ -57,9 +52,9 @@ def main() -> None:
         md_new = os.path.join(out, f"convs_{batch}_new_1", "convs.md")
         pk = peak_gflops(md_new)
         ort = {}
-        ort_md = os.path.join(out, f"convs_{batch}_new_1", "ort_convs.csv")
-        if os.path.exists(ort_md):
-            with open(ort_md) as f:
+        ort_csv = os.path.join(out, f"convs_{batch}_new_1", "ort_convs.csv")
+        if os.path.exists(ort_csv):
+            with open(ort_csv) as f:
                 for r in csv.DictReader(f):
                     k = (r["model"], int(r["size"]), "forward")
                     ort[k] = ort.get(k, 0.0) + int(r["count"]) * float(r["ort_node_ms"])

@@ -34,6 +34,8 @@ import onnx
 import onnxruntime as ort
 from onnx import TensorProto, helper, numpy_helper
 
+from convs_csv import used_ms as flex_ms
+
 
 def conv_model(c_in, c_out, k, stride, groups, hw, batch):
     """A graph with one Conv node (bias, pads k/2, dilation 1) on a fixed input shape."""
@@ -92,12 +94,6 @@ def time_shape(model, x, threads, runs, tmp):
     node = per_node[conv[0]][-runs:]
     reorder = [sum(v) for v in zip(*(per_node[n][-runs:] for n in other))] if other else [0.0]
     return statistics.median(node), statistics.median(reorder), statistics.median(wall), ops
-
-
-def flex_ms(r):
-    """What flex's conv2d runs for this forward: the engine, or the old path where dispatch
-    keeps it (1×1 stride 1, depthwise)."""
-    return float(r["old_ms"] if r["engine_forward"] != "true" else r["new_ms"])
 
 
 def main() -> None:

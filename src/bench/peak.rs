@@ -8,8 +8,6 @@
 //!   flex's GEMM kernels use on this CPU (AVX-512 where present: chicktrain builds the
 //!   `gemm` crate with its `x86-v4` kernels, chosen at run time).
 
-use std::time::Instant;
-
 use anyhow::{bail, Context, Result};
 
 /// Nominal and measured peak of this machine for the GEMM kernels flex runs.
@@ -110,7 +108,7 @@ fn measure_fma(threads: usize, lanes: usize) -> Option<f64> {
         }
         let mut best = 0.0f64;
         for _ in 0..3 {
-            let t0 = Instant::now();
+            let t0 = std::time::Instant::now();
             let handles: Vec<_> = (0..threads)
                 .map(|_| std::thread::spawn(move || fma_chains(lanes, FMA_ITERS)))
                 .collect();
@@ -127,7 +125,7 @@ fn measure_fma(threads: usize, lanes: usize) -> Option<f64> {
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
-        let _ = (threads, lanes, Instant::now());
+        let _ = (threads, lanes);
         None
     }
 }

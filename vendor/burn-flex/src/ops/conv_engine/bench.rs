@@ -72,7 +72,7 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-fn interleaved(old: &dyn Fn(), new: &dyn Fn()) -> (f64, f64) {
+fn interleaved(old: &mut dyn FnMut(), new: &mut dyn FnMut()) -> (f64, f64) {
     old();
     new();
     let (mut a, mut b) = (Vec::new(), Vec::new());
@@ -111,11 +111,11 @@ fn bench_yolo11n_seg_shapes() {
             let fwd = prefers_forward(&g);
             let timings = [
                 interleaved(
-                    &|| drop(conv2d_f32(x.clone(), w.clone(), None, &opts)),
-                    &|| drop(super::conv2d(x.clone(), w.clone(), None, &opts)),
+                    &mut || drop(conv2d_f32(x.clone(), w.clone(), None, &opts)),
+                    &mut || drop(super::conv2d(x.clone(), w.clone(), None, &opts)),
                 ),
                 interleaved(
-                    &|| {
+                    &mut || {
                         drop(reference::x_backward_f32(
                             &x_shape,
                             w.clone(),
@@ -123,7 +123,7 @@ fn bench_yolo11n_seg_shapes() {
                             &opts,
                         ))
                     },
-                    &|| {
+                    &mut || {
                         drop(super::conv2d_x_backward(
                             &x_shape,
                             w.clone(),
@@ -133,7 +133,7 @@ fn bench_yolo11n_seg_shapes() {
                     },
                 ),
                 interleaved(
-                    &|| {
+                    &mut || {
                         drop(reference::weight_backward_f32(
                             x.clone(),
                             &w_shape,
@@ -141,7 +141,7 @@ fn bench_yolo11n_seg_shapes() {
                             &opts,
                         ))
                     },
-                    &|| {
+                    &mut || {
                         drop(super::conv2d_weight_backward(
                             x.clone(),
                             &w_shape,
@@ -175,44 +175,26 @@ fn bench_yolo11n_seg_shapes() {
     }
 }
 
-/// Patch 6 alone: the weight gradient with the contiguous panel (before) and
-/// the padded one (after), interleaved, on the same shapes at batch 1 and 8.
-/// `cargo test --release --lib conv_engine::bench::bench_weight_panel -- --ignored --nocapture`
-#[test]
-#[ignore = "benchmark: minutes; run with --ignored --nocapture"]
-fn bench_weight_panel_layouts() {
-    use super::backward::{WeightPanel, weight_grad_with};
-    println!("| batch | size | shape | ×n | contiguous ms | padded ms | ratio |");
+/// One side-by-side table over the model's shapes at batch 1 / 256 px, batch 1
+/// / 640 px and batch 8 / 256 px: `time` gives (`sides[0]` ms, `sides[1]` ms)
+/// for a layer's geometry (`None` skips it), and each (batch, size) ends with
+/// a TOTAL row weighted by the layer counts.
+fn side_by_side(sides: [&str; 2], mut time: impl FnMut(&Geometry) -> Option<(f64, f64)>) {
+    println!(
+        "| batch | size | shape | ×n | {} ms | {} ms | ratio |",
+        sides[0], sides[1]
+    );
     println!("|---|---|---|---|---|---|---|");
     for (batch, size) in [(1usize, 256usize), (1, 640), (8, 256)] {
         let (mut before, mut after) = (0.0f64, 0.0f64);
         for &(c_in, c_out, k, s, groups, level, count) in &SHAPES {
             let hw = size >> level;
             let opts = ConvOptions::new([s; 2], [k / 2; 2], [1, 1], groups);
-            let x_shape = [batch, c_in, hw, hw];
             let w_shape = [c_out, c_in / groups, k, k];
-            let g = Geometry::new(&x_shape, &w_shape, &opts).unwrap();
-            let mut seed = 37;
-            let x = tensor(x_shape, &mut seed);
-            let dy = tensor([batch, c_out, g.oh, g.ow], &mut seed);
-            let (a, b) = interleaved(
-                &|| {
-                    drop(weight_grad_with::<f32>(
-                        &g,
-                        x.clone(),
-                        dy.clone(),
-                        WeightPanel::Contiguous,
-                    ))
-                },
-                &|| {
-                    drop(weight_grad_with::<f32>(
-                        &g,
-                        x.clone(),
-                        dy.clone(),
-                        WeightPanel::Padded,
-                    ))
-                },
-            );
+            let g = Geometry::new(&[batch, c_in, hw, hw], &w_shape, &opts).unwrap();
+            let Some((a, b)) = time(&g) else {
+                continue;
+            };
             before += a * count as f64;
             after += b * count as f64;
             println!(
@@ -227,6 +209,25 @@ fn bench_weight_panel_layouts() {
     }
 }
 
+/// Patch 6 alone: the weight gradient with the contiguous panel (before) and
+/// the padded one (after), interleaved, on the same shapes at batch 1 and 8.
+/// `cargo test --release --lib conv_engine::bench::bench_weight_panel -- --ignored --nocapture`
+#[test]
+#[ignore = "benchmark: minutes; run with --ignored --nocapture"]
+fn bench_weight_panel_layouts() {
+    use super::backward::{WeightPanel, weight_grad_with};
+    side_by_side(["contiguous", "padded"], |g| {
+        let mut seed = 37;
+        let x = tensor([g.batch, g.c_in, g.h, g.w], &mut seed);
+        let dy = tensor([g.batch, g.c_out, g.oh, g.ow], &mut seed);
+        let run = |layout| drop(weight_grad_with::<f32>(g, x.clone(), dy.clone(), layout));
+        Some(interleaved(
+            &mut || run(WeightPanel::Contiguous),
+            &mut || run(WeightPanel::Padded),
+        ))
+    });
+}
+
 /// Patch 7 alone: every im2col panel of a layer (all tiles of all images, as
 /// the forward pass builds them) with the loop as it was and with the
 /// stride-1 block copy, interleaved, on the same shapes at batch 1 and 8.
@@ -235,51 +236,33 @@ fn bench_weight_panel_layouts() {
 #[ignore = "benchmark: minutes; run with --ignored --nocapture"]
 fn bench_im2col_block_copy() {
     use super::panel::im2col_rows_with;
-    println!("| batch | size | shape | ×n | before ms | block copy ms | ratio |");
-    println!("|---|---|---|---|---|---|---|");
-    for (batch, size) in [(1usize, 256usize), (1, 640), (8, 256)] {
-        let (mut before, mut after) = (0.0f64, 0.0f64);
-        for &(c_in, c_out, k, s, groups, level, count) in &SHAPES {
-            let hw = size >> level;
-            let opts = ConvOptions::new([s; 2], [k / 2; 2], [1, 1], groups);
-            let x_shape = [batch, c_in, hw, hw];
-            let w_shape = [c_out, c_in / groups, k, k];
-            let g = Geometry::new(&x_shape, &w_shape, &opts).unwrap();
-            if g.is_pointwise() || g.is_depthwise() {
-                continue; // no panel in the forward pass
-            }
-            let mut seed = 37;
-            let x = tensor(x_shape, &mut seed);
-            let xs: &[f32] = x.storage();
-            let tiles = g.tiles(1);
-            let mut panel = alloc::vec![0.0f32; g.k() * tiles.iter().map(|t| (t.1 - t.0) * g.ow).max().unwrap()];
-            let mut build = |fast: bool| {
-                for b in 0..batch {
+    side_by_side(["before", "block copy"], |g| {
+        if g.is_pointwise() || g.is_depthwise() {
+            return None; // no panel in the forward pass
+        }
+        let mut seed = 37;
+        let x = tensor([g.batch, g.c_in, g.h, g.w], &mut seed);
+        let xs: &[f32] = x.storage();
+        let tiles = &g.tiles(1);
+        let longest = tiles.iter().map(|t| (t.1 - t.0) * g.ow).max().unwrap();
+        // Each side fills a panel of its own, as each thread of the engine does.
+        let build = |fast: bool| {
+            let mut panel = alloc::vec![0.0f32; g.k() * longest];
+            move || {
+                for b in 0..g.batch {
                     for grp in 0..g.groups {
                         let off = (b * g.c_in + grp * g.cpg) * g.in_plane();
                         let x_group = &xs[off..off + g.cpg * g.in_plane()];
-                        for &(r0, r1) in &tiles {
+                        for &(r0, r1) in tiles {
                             let n = (r1 - r0) * g.ow;
-                            im2col_rows_with(&g, x_group, r0, r1, &mut panel[..g.k() * n], n, fast);
+                            let panel = &mut panel[..g.k() * n];
+                            im2col_rows_with(g, x_group, r0, r1, panel, n, fast);
                         }
                     }
                 }
                 core::hint::black_box(&panel);
-            };
-            let cell = core::cell::RefCell::new(&mut build);
-            let (a, b) = interleaved(&|| (cell.borrow_mut())(false), &|| {
-                (cell.borrow_mut())(true)
-            });
-            before += a * count as f64;
-            after += b * count as f64;
-            println!(
-                "| {batch} | {size} | {c_in}→{c_out} {k}×{k} s{s} g{groups} @{hw} | {count} | {a:.3} | {b:.3} | {:.2} |",
-                a / b
-            );
-        }
-        println!(
-            "| {batch} | {size} | TOTAL | | {before:.2} | {after:.2} | {:.2} |",
-            before / after
-        );
-    }
+            }
+        };
+        Some(interleaved(&mut build(false), &mut build(true)))
+    });
 }
