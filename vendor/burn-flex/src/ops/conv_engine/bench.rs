@@ -266,3 +266,76 @@ fn bench_im2col_block_copy() {
         Some(interleaved(&mut build(false), &mut build(true)))
     });
 }
+
+/// Detect-head 3×3 convolutions of YOLO11n-seg not in [`SHAPES`] (box and
+/// mask-coefficient branches at P3–P5): (c_in, c_out, level).
+const HEAD_SHAPES: [(usize, usize, u32); 6] = [
+    (64, 64, 3),
+    (128, 64, 4),
+    (256, 64, 5),
+    (64, 32, 3),
+    (128, 32, 4),
+    (256, 32, 5),
+];
+
+/// The forward split: row tiles cut for the threads as before (`rows`) and
+/// [`Geometry::forward_split`] (row tiles of ≥ 128 pixels, then channel
+/// chunks sharing one panel), interleaved, at batch 1 and 8 on every shape the
+/// engine's forward runs.
+/// `cargo test --release --lib conv_engine::bench::bench_forward_split -- --ignored --nocapture`
+#[test]
+#[ignore = "benchmark: minutes; run with --ignored --nocapture"]
+fn bench_forward_split() {
+    use super::forward::conv2d_split;
+    use super::geometry::ForwardSplit;
+    let threads = super::threads();
+    let shapes = SHAPES
+        .iter()
+        .map(|&(ci, co, k, s, grp, lvl, n)| (ci, co, k, s, grp, lvl, n))
+        .chain(
+            HEAD_SHAPES
+                .iter()
+                .map(|&(ci, co, lvl)| (ci, co, 3, 1, 1, lvl, 1)),
+        );
+    let shapes: Vec<_> = shapes.collect();
+    println!("threads: {threads}");
+    println!("| batch | size | shape | ×n | rows ms | split ms | ratio | tasks before → after |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for (batch, size) in [(1usize, 256usize), (1, 320), (1, 640), (8, 256)] {
+        let (mut before, mut after) = (0.0f64, 0.0f64);
+        for &(c_in, c_out, k, s, groups, level, count) in &shapes {
+            let hw = size >> level;
+            let opts = ConvOptions::new([s; 2], [k / 2; 2], [1, 1], groups);
+            let w_shape = [c_out, c_in / groups, k, k];
+            let g = Geometry::new(&[batch, c_in, hw, hw], &w_shape, &opts).unwrap();
+            if !prefers_forward(&g) {
+                continue;
+            }
+            let mut seed = 37;
+            let x = tensor([batch, c_in, hw, hw], &mut seed);
+            let w = tensor(w_shape, &mut seed);
+            let old = ForwardSplit {
+                rows: g.tiles(threads),
+                channels: alloc::vec![(0, g.mpg)],
+            };
+            let new = g.forward_split(threads);
+            let run = |split: &ForwardSplit| {
+                drop(conv2d_split::<f32>(&g, x.clone(), w.clone(), None, split))
+            };
+            let (a, b) = interleaved(&mut || run(&old), &mut || run(&new));
+            before += a * count as f64;
+            after += b * count as f64;
+            println!(
+                "| {batch} | {size} | {c_in}→{c_out} {k}×{k} s{s} @{hw} | {count} | {a:.3} | {b:.3} | {:.2} | {} → {}×{} |",
+                a / b,
+                batch * old.rows.len(),
+                batch * new.rows.len(),
+                new.channels.len()
+            );
+        }
+        println!(
+            "| {batch} | {size} | TOTAL | | {before:.2} | {after:.2} | {:.2} | |",
+            before / after
+        );
+    }
+}

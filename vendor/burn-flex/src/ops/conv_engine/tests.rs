@@ -389,3 +389,65 @@ fn gradients_write_every_element_of_unzeroed_buffers() {
         assert_close("weight grad vs naive", &c, &values(&dw), &dw_ref);
     }
 }
+
+/// The forward pass cut for 1 to 16 threads (row tiles alone, or row tiles
+/// and channel chunks with shared panels) against the direct loop; every
+/// split is a partition of the output, and the channel-split path runs.
+#[test]
+fn forward_splits_partition_the_output_and_agree() {
+    use super::forward::conv2d_split;
+    let mut rng = Lcg(91);
+    let mut chunked = 0;
+    for i in 0..30 {
+        let groups = [1, 1, 2][rng.below(3)];
+        let c_in = groups * (1 + rng.below(6));
+        let c_out = groups * (1 + rng.below(24));
+        let k = [1, 3, 3][rng.below(3)];
+        let (stride, pad) = (1 + rng.below(2), rng.below(2));
+        let batch = [1, 1, 2][rng.below(3)];
+        let (h, w) = (k + rng.below(12), k + rng.below(12));
+        let c = case([batch, c_in, h, w], c_out, k, stride, pad, 1, groups);
+        let opts = ConvOptions::new(c.stride, c.pad, c.dil, c.groups);
+        let w_shape = [c.c_out, c.x[1] / c.groups, c.k[0], c.k[1]];
+        let Some(g) = Geometry::new(&c.x, &w_shape, &opts) else {
+            continue;
+        };
+        let x = rng.vec(c.x.iter().product());
+        let wv = rng.vec(w_shape.iter().product());
+        let dy = vec![0.0; g.batch * g.c_out * g.out_plane()];
+        let [y_ref, _, _] = naive(&c, &g, &x, &wv, &dy);
+        for threads in [1, 2, 4, 16] {
+            let split = g.forward_split(threads);
+            let mut rows_seen = vec![0; g.oh];
+            split
+                .rows
+                .iter()
+                .for_each(|&(r0, r1)| (r0..r1).for_each(|r| rows_seen[r] += 1));
+            let mut chans_seen = vec![0; g.mpg];
+            split
+                .channels
+                .iter()
+                .for_each(|&(m0, m1)| (m0..m1).for_each(|m| chans_seen[m] += 1));
+            assert!(
+                rows_seen.iter().chain(&chans_seen).all(|&n| n == 1),
+                "{c:?} {split:?}"
+            );
+            chunked += usize::from(split.channels.len() > 1);
+            let y = conv2d_split::<f32>(
+                &g,
+                t4(x.clone(), c.x),
+                t4(wv.clone(), w_shape),
+                None,
+                &split,
+            );
+            assert_close(
+                &alloc::format!("forward, {threads} threads"),
+                &c,
+                &y,
+                &y_ref,
+            );
+        }
+        let _ = i;
+    }
+    assert!(chunked >= 10, "only {chunked} splits cut the channels");
+}
