@@ -14,21 +14,6 @@ use burn_backend::ops::conv::calculate_conv_output_size;
 /// YOLO-sized layers (K ≤ 9 · 256) in L2 and is the old path's tile size too.
 const TILE_COLS: usize = 512;
 
-/// Fewest output pixels a forward tile is cut down to when a small batch has
-/// too few tiles for the threads; past that the output channels are split
-/// instead ([`Geometry::forward_split`]). Cutting an 8×8 plane into four
-/// 16-column tiles made every task pack the layer's whole weight for 16
-/// columns of work (`head box c1`, 256→64 3×3 at 8×8: 6.9× ONNX Runtime's time).
-const MIN_SPLIT_COLS: usize = 128;
-
-/// The forward pass's tasks: every (image, row tile, channel chunk), each
-/// chunk a half-open range of output channels within every group.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ForwardSplit {
-    pub rows: alloc::vec::Vec<(usize, usize)>,
-    pub channels: alloc::vec::Vec<(usize, usize)>,
-}
-
 /// Geometry of a grouped 2D convolution over NCHW tensors with symmetric padding.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Geometry {
@@ -151,36 +136,6 @@ impl Geometry {
             .step_by(rows)
             .map(|r0| (r0, (r0 + rows).min(self.oh)))
             .collect()
-    }
-
-    /// How the forward pass cuts the layer into tasks: output-row tiles as in
-    /// [`Self::tiles`] while tiles keep at least [`MIN_SPLIT_COLS`] pixels, and,
-    /// when the batch and those tiles still give fewer than two tasks per
-    /// thread, each group's output channels in chunks (multiples of 8) so the
-    /// threads share the weight instead of each packing all of it.
-    pub fn forward_split(&self, threads: usize) -> ForwardSplit {
-        let want = 2 * threads;
-        let mut rows = (TILE_COLS / self.ow).clamp(1, self.oh);
-        let tiles_wanted = want.div_ceil(self.batch);
-        if self.oh.div_ceil(rows) < tiles_wanted {
-            let min_rows = MIN_SPLIT_COLS.div_ceil(self.ow).clamp(1, self.oh);
-            rows = self.oh.div_ceil(tiles_wanted).max(min_rows).min(rows);
-        }
-        let rows: alloc::vec::Vec<(usize, usize)> = (0..self.oh)
-            .step_by(rows)
-            .map(|r0| (r0, (r0 + rows).min(self.oh)))
-            .collect();
-        let tasks = self.batch * rows.len();
-        let chunk = if tasks < want {
-            self.mpg.div_ceil(want.div_ceil(tasks)).next_multiple_of(8)
-        } else {
-            self.mpg
-        };
-        let channels = (0..self.mpg)
-            .step_by(chunk.max(1))
-            .map(|m0| (m0, (m0 + chunk).min(self.mpg)))
-            .collect();
-        ForwardSplit { rows, channels }
     }
 
     /// Output columns `[lo, hi)` whose input column `o * sw + j * dw - pw`
