@@ -29,7 +29,7 @@ fn main() -> ExitCode {
 /// back to the kernel on `free` and trims the heap top above 128 KiB, so every
 /// step pays `mmap`/`munmap` and zeroing page faults again. Raising both keeps
 /// freed blocks for reuse (the mmap threshold's ceiling is 32 MiB on 64-bit);
-/// what this bought and cost is measured in `bench/results/speed/` (issue 37).
+/// what this bought and cost: `bench/results/convs/alloc_s2_2026-12-07/` (issue 37).
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn keep_freed_tensors() {
     // SAFETY: mallopt only sets allocator parameters; it is called before any

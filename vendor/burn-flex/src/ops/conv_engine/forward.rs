@@ -2,7 +2,6 @@
 //! `out[mpg, n] (+)= W_g[mpg, k] · panel[k, n]` written straight into the NCHW
 //! output, with the bias as the GEMM's initial accumulator.
 
-use alloc::vec;
 use alloc::vec::Vec;
 
 use super::geometry::Geometry;
@@ -22,13 +21,18 @@ pub(super) fn conv2d<T: Elem>(
     let xs: &[T] = x.storage();
     let ws: &[T] = weight.storage();
     let plane = g.out_plane();
-    let mut out = vec![T::ZERO; g.batch * g.c_out * plane];
+    let len = g.batch * g.c_out * plane;
+    // Not zero-filled (patch 9): with a bias every plane starts as its bias
+    // value, which the GEMMs add to; without one the first and only GEMM into
+    // each element writes it with `read_dst = false` (the tiles cover every
+    // row of every (image, group) block).
+    let mut out: Vec<T> = Vec::with_capacity(len);
     let with_bias = bias.is_some();
     if let Some(bias) = bias {
         let bias = bias.to_contiguous();
         let bs: &[T] = bias.storage();
-        for (i, chunk) in out.chunks_exact_mut(plane).enumerate() {
-            chunk.fill(bs[i % g.c_out]);
+        for i in 0..g.batch * g.c_out {
+            out.extend(core::iter::repeat_n(bs[i % g.c_out], plane));
         }
     }
     let tiles = g.tiles(threads());
@@ -42,6 +46,9 @@ pub(super) fn conv2d<T: Elem>(
             unsafe { tile(g, xs, ws, dst, b, grp, r0, r1, with_bias, panel) };
         }
     });
+    // SAFETY: every element is initialised, by the bias fill or by the GEMMs
+    // (`engine_writes_every_element_of_unzeroed_buffers`).
+    unsafe { out.set_len(len) };
     out
 }
 

@@ -263,9 +263,9 @@ fn weight_grad_panel_layouts_are_bit_identical() {
     }
 }
 
-/// Patch 7: the stride-1 block copy builds the same panel as the loop before
-/// it, on listed shapes and 60 seeded random ones (every tile of every image;
-/// a third of them stride 2, which must keep the loop).
+/// Patches 7 and 8: the stride-1 block copy and the stride-2 gather build the
+/// same panel as the loop before them, on listed shapes and 60 seeded random
+/// ones (every tile of every image; a third of them stride 2).
 #[test]
 fn fast_panels_equal_the_row_loop() {
     use super::panel::im2col_rows_with;
@@ -289,17 +289,18 @@ fn fast_panels_equal_the_row_loop() {
             dil * (k / 2)
         };
         let (h, w) = (1 + rng.below(12), 1 + rng.below(12));
+        let stride = [1, 1, 2][rng.below(3)];
         cases.push(case(
             [1 + rng.below(2), 1 + rng.below(4), h, w],
             2,
             k,
-            1,
+            stride,
             pad,
             dil,
             1,
         ));
     }
-    let mut fast_hits = 0;
+    let (mut fast_hits, mut stride2_hits) = (0, 0);
     for (ci, c) in cases.into_iter().enumerate() {
         let opts = ConvOptions::new(c.stride, c.pad, c.dil, c.groups);
         let w_shape = [c.c_out, c.x[1] / c.groups, c.k[0], c.k[1]];
@@ -307,6 +308,7 @@ fn fast_panels_equal_the_row_loop() {
             continue; // a kernel larger than the padded input
         };
         fast_hits += usize::from(g.ow == g.w && g.sw == 1);
+        stride2_hits += usize::from(g.sw == 2);
         let x = Lcg(ci as u64).vec(c.x.iter().product());
         for b in 0..g.batch {
             let x_group = &x[b * g.c_in * g.in_plane()..][..g.cpg * g.in_plane()];
@@ -328,8 +330,8 @@ fn fast_panels_equal_the_row_loop() {
         }
     }
     assert!(
-        fast_hits >= 20,
-        "only {fast_hits} cases took the block copy"
+        fast_hits >= 20 && stride2_hits >= 10,
+        "only {fast_hits} cases took the block copy, {stride2_hits} the stride-2 gather"
     );
 }
 
@@ -355,11 +357,12 @@ fn assert_finite(what: &str, case: &Case, v: &[f32]) {
     assert_eq!(bad, 0, "{what}: {bad} unwritten (NaN) elements, {case:?}");
 }
 
-/// Patch 5: the gradients' buffers are not zero-filled, so every element
-/// must be written. Small shapes (glibc serves them from its free lists, not
-/// fresh zeroed pages), checked for NaN and against the direct f64 loop.
+/// Patches 5 and 9: the gradients' and the forward output's buffers are not
+/// zero-filled, so every element must be written. Small shapes (glibc serves
+/// them from its free lists, not fresh zeroed pages), checked for NaN and
+/// against the direct f64 loop.
 #[test]
-fn gradients_write_every_element_of_unzeroed_buffers() {
+fn engine_writes_every_element_of_unzeroed_buffers() {
     let cases = [
         case([2, 8, 9, 11], 16, 1, 1, 0, 1, 1), // pointwise: GEMM overwrites dX
         case([3, 6, 7, 5], 4, 1, 1, 0, 1, 2),   // pointwise, 2 groups
@@ -375,9 +378,13 @@ fn gradients_write_every_element_of_unzeroed_buffers() {
         let x = rng.vec(c.x.iter().product());
         let w = rng.vec(w_shape.iter().product());
         let dy = rng.vec(g.batch * g.c_out * g.out_plane());
-        let [_, dx_ref, dw_ref] = naive(&c, &g, &x, &w, &dy);
+        let [y_ref, dx_ref, dw_ref] = naive(&c, &g, &x, &w, &dy);
         let y_shape = [g.batch, g.c_out, g.oh, g.ow];
         let (xt, wt, dyt) = (t4(x, c.x), t4(w, w_shape), t4(dy, y_shape));
+        poison(y_ref.len());
+        let y = super::conv2d(xt.clone(), wt.clone(), None, &opts).unwrap();
+        assert_finite("forward", &c, &values(&y));
+        assert_close("forward vs naive", &c, &values(&y), &y_ref);
         poison(dx_ref.len());
         let dx = super::conv2d_x_backward(&c.x, wt, dyt.clone(), &opts).unwrap();
         assert_finite("x grad", &c, &values(&dx));
