@@ -266,3 +266,86 @@ fn bench_im2col_block_copy() {
         Some(interleaved(&mut build(false), &mut build(true)))
     });
 }
+
+/// Patch 10 alone: every col2im of a layer's input gradient (all tiles of all
+/// images and groups, as the backward pass scatters them) with the loop as it
+/// was and with the stride-2 scatter, interleaved; stride-1 layers take the
+/// same code on both sides (a control of the bench's noise).
+/// `cargo test --release --lib conv_engine::bench::bench_col2im -- --ignored --nocapture`
+#[test]
+#[ignore = "benchmark: minutes; run with --ignored --nocapture"]
+fn bench_col2im_stride2_scatter() {
+    use super::panel::col2im_rows_with;
+    side_by_side(["before", "scatter"], |g| {
+        if g.is_pointwise() {
+            return None; // the input gradient is a GEMM written in place
+        }
+        let mut seed = 37;
+        let tiles = &g.tiles(1);
+        // One panel per tile, as the GEMM before each col2im leaves it.
+        let panels: Vec<FlexTensor> = tiles
+            .iter()
+            .map(|t| tensor([1, 1, g.k(), (t.1 - t.0) * g.ow], &mut seed))
+            .collect();
+        let panels = &panels;
+        let run = |fast: bool| {
+            let mut dx = alloc::vec![0.0f32; g.batch * g.c_in * g.in_plane()];
+            move || {
+                dx.fill(0.0);
+                for b in 0..g.batch {
+                    for grp in 0..g.groups {
+                        let off = (b * g.c_in + grp * g.cpg) * g.in_plane();
+                        let dx_group = &mut dx[off..off + g.cpg * g.in_plane()];
+                        for (&(r0, r1), p) in tiles.iter().zip(panels.iter()) {
+                            col2im_rows_with(g, p.storage(), r0, r1, dx_group, fast);
+                        }
+                    }
+                }
+                core::hint::black_box(&dx);
+            }
+        };
+        Some(interleaved(&mut run(false), &mut run(true)))
+    });
+}
+
+/// Patch 11 alone: a layer's forward and both gradients through the engine
+/// with a fresh scratch buffer per rayon job (as before) and with each
+/// thread's buffer kept between calls, interleaved, on the same shapes at
+/// batch 1 and 8. The engine's own forward runs for every shape here, the
+/// 1×1 and depthwise ones included (their forward is dispatched elsewhere).
+/// `cargo test --release --lib --features x86-v4 conv_engine::bench::bench_scratch -- --ignored --nocapture`
+#[test]
+#[ignore = "benchmark: minutes; run with --ignored --nocapture"]
+fn bench_scratch_kept_per_thread() {
+    use core::sync::atomic::Ordering;
+    side_by_side(["fresh", "kept"], |g| {
+        let mut seed = 37;
+        let x_shape = [g.batch, g.c_in, g.h, g.w];
+        let w_shape = [g.c_out, g.cpg, g.kh, g.kw];
+        let x = tensor(x_shape, &mut seed);
+        let w = tensor(w_shape, &mut seed);
+        let dy = tensor([g.batch, g.c_out, g.oh, g.ow], &mut seed);
+        let opts = ConvOptions::new([g.sh, g.sw], [g.ph, g.pw], [g.dh, g.dw], g.groups);
+        let (x, w, dy, opts) = (&x, &w, &dy, &opts);
+        let step = |fresh: bool| {
+            move || {
+                super::FRESH_SCRATCH.store(fresh, Ordering::Relaxed);
+                drop(super::conv2d(x.clone(), w.clone(), None, opts));
+                drop(super::conv2d_x_backward(
+                    &x_shape,
+                    w.clone(),
+                    dy.clone(),
+                    &opts,
+                ));
+                drop(super::conv2d_weight_backward(
+                    x.clone(),
+                    &w_shape,
+                    dy.clone(),
+                    &opts,
+                ));
+                super::FRESH_SCRATCH.store(false, Ordering::Relaxed);
+            }
+        };
+        Some(interleaved(&mut step(true), &mut step(false)))
+    });
+}

@@ -95,12 +95,34 @@ pub(crate) fn threads() -> usize {
 }
 
 /// Run `f(task, scratch)` for `0..tasks`, in parallel where rayon is enabled,
-/// with one reusable scratch buffer per worker.
+/// with a scratch buffer per worker that outlives the call (patch 11).
+///
+/// `for_each_init` made a fresh buffer for every rayon job, i.e. an allocation
+/// and a zero-filling `resize` of a whole panel per tile or two, on every
+/// convolution of every step; the panels are then overwritten before they are
+/// read. Each thread now keeps its buffer between calls (it only grows, to the
+/// largest panel that thread has built), so a panel is zero-filled once.
+/// Callers still see a `Vec` whose contents are whatever the previous task
+/// left, as with a reused `for_each_init` buffer.
 pub(crate) fn for_each_task<T: Elem, F>(tasks: usize, f: F)
 where
     F: Fn(usize, &mut alloc::vec::Vec<T>) + Send + Sync,
 {
-    #[cfg(feature = "rayon")]
+    #[cfg(all(feature = "rayon", feature = "std"))]
+    {
+        use rayon::prelude::*;
+        #[cfg(test)]
+        if FRESH_SCRATCH.load(core::sync::atomic::Ordering::Relaxed) {
+            (0..tasks)
+                .into_par_iter()
+                .for_each_init(alloc::vec::Vec::new, |buf, t| f(t, buf));
+            return;
+        }
+        (0..tasks)
+            .into_par_iter()
+            .for_each(|t| scratch::with(|buf| f(t, buf)));
+    }
+    #[cfg(all(feature = "rayon", not(feature = "std")))]
     {
         use rayon::prelude::*;
         (0..tasks)
@@ -111,6 +133,70 @@ where
     {
         let mut buf = alloc::vec::Vec::new();
         (0..tasks).for_each(|t| f(t, &mut buf));
+    }
+}
+
+/// The bench's switch back to a fresh buffer per rayon job (as before patch 11).
+#[cfg(test)]
+pub(crate) static FRESH_SCRATCH: core::sync::atomic::AtomicBool =
+    core::sync::atomic::AtomicBool::new(false);
+
+/// Fill every rayon worker's kept scratch buffer of `T` with `len` copies of
+/// `value`, as if a task before had left them there (tests of patch 11).
+#[cfg(all(test, feature = "rayon", feature = "std"))]
+pub(crate) fn poison_scratch<T: Elem>(len: usize, value: T) {
+    rayon::broadcast(|_| {
+        scratch::with(|buf: &mut alloc::vec::Vec<T>| {
+            buf.clear();
+            buf.resize(len, value);
+        })
+    });
+}
+
+/// Per-thread scratch buffers of [`for_each_task`], one per element type.
+#[cfg(all(feature = "rayon", feature = "std"))]
+mod scratch {
+    extern crate std;
+
+    use alloc::boxed::Box;
+    use alloc::vec::Vec;
+    use core::any::{Any, TypeId};
+    use core::cell::RefCell;
+
+    std::thread_local! {
+        static BUFFERS: RefCell<Vec<(TypeId, Box<dyn Any>)>> = const { RefCell::new(Vec::new()) };
+    }
+
+    /// `f` with this thread's buffer of `T`s. The buffer is taken out of the
+    /// thread-local for the call, so a task that runs another one on this
+    /// thread (rayon steals while a task waits on a nested parallel GEMM)
+    /// gets a buffer of its own instead of a second borrow.
+    pub(super) fn with<T: 'static, R>(f: impl FnOnce(&mut Vec<T>) -> R) -> R {
+        let id = TypeId::of::<T>();
+        let taken = BUFFERS.with_borrow_mut(|bufs| {
+            let at = bufs.iter().position(|(t, _)| *t == id)?;
+            Some(bufs.swap_remove(at).1)
+        });
+        let mut buf: Vec<T> = taken
+            .and_then(|b| b.downcast::<Vec<T>>().ok())
+            .map(|b| *b)
+            .unwrap_or_default();
+        let out = f(&mut buf);
+        BUFFERS.with_borrow_mut(|bufs| {
+            // A nested task may have put one back meanwhile: keep the larger.
+            if let Some(at) = bufs.iter().position(|(t, _)| *t == id) {
+                let other_len = bufs[at]
+                    .1
+                    .downcast_ref::<Vec<T>>()
+                    .map_or(0, |v| v.capacity());
+                if other_len >= buf.capacity() {
+                    return;
+                }
+                bufs.swap_remove(at);
+            }
+            bufs.push((id, Box::new(buf)));
+        });
+        out
     }
 }
 

@@ -151,6 +151,22 @@ pub(crate) fn col2im_rows<T: Elem>(
     r1: usize,
     dx_group: &mut [T],
 ) {
+    col2im_rows_with(g, panel, r0, r1, dx_group, true);
+}
+
+/// [`col2im_rows`] with patch 10's stride-2 scatter ([`add_every_other`]) on
+/// or off (`fast`; off: the loop as it was, kept for the test and the bench
+/// that compare the two). Each input position receives its additions in the
+/// same order either way (one panel row adds at most once to a position), so
+/// the two agree bit for bit.
+pub(crate) fn col2im_rows_with<T: Elem>(
+    g: &Geometry,
+    panel: &[T],
+    r0: usize,
+    r1: usize,
+    dx_group: &mut [T],
+    fast: bool,
+) {
     let n = (r1 - r0) * g.ow;
     let plane = g.in_plane();
     for c in 0..g.cpg {
@@ -174,6 +190,8 @@ pub(crate) fn col2im_rows<T: Elem>(
                         for (d, &v) in dst[first..first + (hi - lo)].iter_mut().zip(seg) {
                             *d = *d + v;
                         }
+                    } else if fast && g.sw == 2 && hi - lo >= 16 {
+                        add_every_other(seg, &mut dst[first..]);
                     } else {
                         for (o, &v) in seg.iter().enumerate() {
                             let d = &mut dst[first + o * g.sw];
@@ -184,6 +202,19 @@ pub(crate) fn col2im_rows<T: Elem>(
             }
         }
     }
+}
+
+/// `dst[2 o] += src[o]`: the adjoint of [`every_other`], for the input
+/// gradient of stride-2 layers, as pairs of `dst` (the general loop's
+/// `dst[first + o * sw]` with a run-time stride is scalar).
+fn add_every_other<T: Elem>(src: &[T], dst: &mut [T]) {
+    let Some(last) = src.len().checked_sub(1) else {
+        return;
+    };
+    for (pair, &v) in dst[..2 * last].chunks_exact_mut(2).zip(&src[..last]) {
+        pair[0] = pair[0] + v;
+    }
+    dst[2 * last] = dst[2 * last] + src[last];
 }
 
 /// Row stride of the weight gradient's panel for tiles of `n` pixels: `n`

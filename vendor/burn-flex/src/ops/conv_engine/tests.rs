@@ -228,6 +228,49 @@ fn engine_matches_reference_on_random_shapes() {
     }
 }
 
+/// Patch 11: the scratch buffers each worker keeps between calls hold what
+/// the last task left there. With every worker's buffer filled with NaN first,
+/// the engine's outputs and gradients must still be finite and match the
+/// direct loops: no path may read a panel entry it did not write.
+#[test]
+fn engine_ignores_what_kept_scratch_buffers_hold() {
+    let cases = [
+        case([1, 5, 13, 9], 7, 3, 1, 1, 1, 1), // 3×3 same padding: zero columns
+        case([2, 3, 6, 40], 4, 3, 2, 1, 1, 1), // stride 2, rows of 20 pixels
+        case([1, 4, 6, 6], 3, 3, 1, 0, 1, 1),  // no padding
+        case([2, 8, 9, 9], 4, 3, 1, 2, 2, 2),  // dilation, groups
+        case([3, 6, 7, 5], 4, 1, 1, 0, 1, 2),  // pointwise, 2 groups
+        case([1, 6, 10, 12], 6, 3, 1, 1, 1, 6), // depthwise
+        case([1, 8, 60, 20], 8, 3, 1, 1, 1, 1), // several rows per tile
+    ];
+    for (i, c) in cases.into_iter().enumerate() {
+        let opts = ConvOptions::new(c.stride, c.pad, c.dil, c.groups);
+        let w_shape = [c.c_out, c.x[1] / c.groups, c.k[0], c.k[1]];
+        let g = Geometry::new(&c.x, &w_shape, &opts).unwrap();
+        let mut rng = Lcg(7000 + i as u64);
+        let x = t4(rng.vec(c.x.iter().product()), c.x);
+        let w = t4(rng.vec(w_shape.iter().product()), w_shape);
+        let dy = t4(
+            rng.vec(g.batch * g.c_out * g.out_plane()),
+            [g.batch, g.c_out, g.oh, g.ow],
+        );
+        for pass in ["forward", "x grad", "weight grad"] {
+            super::poison_scratch::<f32>(1 << 16, f32::NAN);
+            let out = match pass {
+                "forward" => super::conv2d(x.clone(), w.clone(), None, &opts),
+                "x grad" => super::conv2d_x_backward(&c.x, w.clone(), dy.clone(), &opts),
+                _ => super::conv2d_weight_backward(x.clone(), &w_shape, dy.clone(), &opts),
+            };
+            assert!(
+                values(&out.unwrap()).iter().all(|v| v.is_finite()),
+                "{pass} read a stale scratch entry, {c:?}"
+            );
+        }
+        super::poison_scratch::<f32>(1 << 16, f32::NAN);
+        check(c, 7100 + i as u64);
+    }
+}
+
 /// Patch 6: the padded panel changes where the
 /// weight gradient's GEMM reads, not what it adds or in which order, so the
 /// two layouts give the same bits.
@@ -263,12 +306,15 @@ fn weight_grad_panel_layouts_are_bit_identical() {
     }
 }
 
-/// Patches 7 and 8: the stride-1 block copy and the stride-2 gather build the
-/// same panel as the loop before them, on listed shapes and 60 seeded random
-/// ones (every tile of every image; a third of them stride 2).
+/// Patches 7, 8 and 10: the stride-1 block copy and the stride-2 gather build
+/// the same panel as the loop before them, and the stride-2 scatter adds a
+/// panel back onto the input gradient bit for bit as the loop did, on listed
+/// shapes and 60 seeded random ones (every tile of every image; a third of
+/// them stride 2, as wide as 48 columns so that rows reach the 16-pixel
+/// threshold of the stride-2 paths).
 #[test]
 fn fast_panels_equal_the_row_loop() {
-    use super::panel::im2col_rows_with;
+    use super::panel::{col2im_rows_with, im2col_rows_with};
     let mut rng = Lcg(91);
     let mut cases = vec![
         case([1, 5, 13, 9], 7, 3, 1, 1, 1, 1),
@@ -276,8 +322,11 @@ fn fast_panels_equal_the_row_loop() {
         case([1, 8, 60, 20], 8, 3, 1, 1, 1, 1),
         case([1, 2, 1, 9], 3, 3, 1, 1, 1, 1),
         case([1, 3, 11, 11], 5, 5, 1, 2, 1, 1),
-        case([8, 4, 8, 8], 8, 3, 2, 1, 1, 1), // stride 2: the strided gather
+        case([8, 4, 8, 8], 8, 3, 2, 1, 1, 1), // stride 2, rows of 4 pixels: the loop
         case([1, 3, 11, 11], 5, 5, 2, 2, 1, 1), // 5×5 stride 2
+        case([2, 3, 6, 40], 4, 3, 2, 1, 1, 1), // stride 2, rows of 20: gather and scatter
+        case([1, 2, 5, 37], 3, 3, 2, 0, 1, 1), // no padding, odd width: 18 pixels
+        case([1, 2, 7, 45], 3, 5, 2, 2, 1, 1), // 5×5 stride 2, 23 pixels
     ];
     for _ in 0..60 {
         let k = [1, 3, 3, 5][rng.below(4)];
@@ -288,8 +337,13 @@ fn fast_panels_equal_the_row_loop() {
         } else {
             dil * (k / 2)
         };
-        let (h, w) = (1 + rng.below(12), 1 + rng.below(12));
         let stride = [1, 1, 2][rng.below(3)];
+        let h = 1 + rng.below(12);
+        let w = if stride == 2 {
+            1 + rng.below(48)
+        } else {
+            1 + rng.below(12)
+        };
         cases.push(case(
             [1 + rng.below(2), 1 + rng.below(4), h, w],
             2,
@@ -308,10 +362,19 @@ fn fast_panels_equal_the_row_loop() {
             continue; // a kernel larger than the padded input
         };
         fast_hits += usize::from(g.ow == g.w && g.sw == 1);
-        stride2_hits += usize::from(g.sw == 2);
-        let x = Lcg(ci as u64).vec(c.x.iter().product());
+        // A row of at least 16 valid pixels takes the stride-2 gather and scatter.
+        stride2_hits += usize::from(
+            g.sw == 2
+                && (0..g.kw).any(|j| {
+                    let (lo, hi) = g.valid_cols(j);
+                    hi >= lo + 16
+                }),
+        );
+        let mut rng = Lcg(ci as u64);
+        let x = rng.vec(c.x.iter().product());
+        let plane_len = g.cpg * g.in_plane();
         for b in 0..g.batch {
-            let x_group = &x[b * g.c_in * g.in_plane()..][..g.cpg * g.in_plane()];
+            let x_group = &x[b * g.c_in * g.in_plane()..][..plane_len];
             for (r0, r1) in g.tiles(1).into_iter().chain(g.tiles(4)) {
                 let n = (r1 - r0) * g.ow;
                 let ld = n + 3;
@@ -326,12 +389,22 @@ fn fast_panels_equal_the_row_loop() {
                         "{c:?} rows {r0}..{r1} panel row {row}"
                     );
                 }
+                // The adjoint: a random panel added onto a random gradient.
+                let panel = rng.vec(g.k() * n);
+                let dx0 = rng.vec(plane_len);
+                let (mut da, mut db) = (dx0.clone(), dx0);
+                col2im_rows_with(&g, &panel, r0, r1, &mut da, false);
+                col2im_rows_with(&g, &panel, r0, r1, &mut db, true);
+                assert!(
+                    da.iter().zip(&db).all(|(p, q)| p.to_bits() == q.to_bits()),
+                    "{c:?} rows {r0}..{r1}: col2im differs"
+                );
             }
         }
     }
     assert!(
         fast_hits >= 20 && stride2_hits >= 10,
-        "only {fast_hits} cases took the block copy, {stride2_hits} the stride-2 gather"
+        "only {fast_hits} cases took the block copy, {stride2_hits} the stride-2 paths"
     );
 }
 
