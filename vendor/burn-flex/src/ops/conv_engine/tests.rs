@@ -232,6 +232,7 @@ fn engine_matches_reference_on_random_shapes() {
 /// the last task left there. With every worker's buffer filled with NaN first,
 /// the engine's outputs and gradients must still be finite and match the
 /// direct loops: no path may read a panel entry it did not write.
+#[cfg(all(feature = "rayon", feature = "std"))]
 #[test]
 fn engine_ignores_what_kept_scratch_buffers_hold() {
     let cases = [
