@@ -335,13 +335,13 @@ fn bench_scratch_kept_per_thread() {
                     &x_shape,
                     w.clone(),
                     dy.clone(),
-                    &opts,
+                    opts,
                 ));
                 drop(super::conv2d_weight_backward(
                     x.clone(),
                     &w_shape,
                     dy.clone(),
-                    &opts,
+                    opts,
                 ));
                 super::FRESH_SCRATCH.store(false, Ordering::Relaxed);
             }

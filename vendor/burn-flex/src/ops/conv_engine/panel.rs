@@ -69,7 +69,7 @@ pub(crate) fn im2col_rows_with<T: Elem>(
                         let first = lo * g.sw + j * g.dw - g.pw;
                         if g.sw == 1 {
                             seg[lo..hi].copy_from_slice(&src[first..first + (hi - lo)]);
-                        } else if fast && g.sw == 2 && hi - lo >= 16 {
+                        } else if fast && g.sw == 2 && hi - lo >= PAIRS_MIN_PIXELS {
                             every_other(&src[first..], &mut seg[lo..hi]);
                         } else {
                             for (o, v) in seg[lo..hi].iter_mut().enumerate() {
@@ -82,6 +82,10 @@ pub(crate) fn im2col_rows_with<T: Elem>(
         }
     }
 }
+
+/// Shortest stride-2 row (valid pixels) that [`every_other`] and
+/// [`add_every_other`] take; shorter rows keep the indexed loop.
+pub(crate) const PAIRS_MIN_PIXELS: usize = 16;
 
 /// `out[o] = src[2 o]`: stride-2 columns (the downsampling 3×3 layers) as
 /// pairs of `src`, a loop the compiler vectorises with shuffles, where the
@@ -190,7 +194,7 @@ pub(crate) fn col2im_rows_with<T: Elem>(
                         for (d, &v) in dst[first..first + (hi - lo)].iter_mut().zip(seg) {
                             *d = *d + v;
                         }
-                    } else if fast && g.sw == 2 && hi - lo >= 16 {
+                    } else if fast && g.sw == 2 && hi - lo >= PAIRS_MIN_PIXELS {
                         add_every_other(seg, &mut dst[first..]);
                     } else {
                         for (o, &v) in seg.iter().enumerate() {

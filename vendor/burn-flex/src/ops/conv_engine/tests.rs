@@ -262,10 +262,7 @@ fn engine_ignores_what_kept_scratch_buffers_hold() {
                 "x grad" => super::conv2d_x_backward(&c.x, w.clone(), dy.clone(), &opts),
                 _ => super::conv2d_weight_backward(x.clone(), &w_shape, dy.clone(), &opts),
             };
-            assert!(
-                values(&out.unwrap()).iter().all(|v| v.is_finite()),
-                "{pass} read a stale scratch entry, {c:?}"
-            );
+            assert_finite(pass, &c, &values(&out.unwrap()));
         }
         super::poison_scratch::<f32>(1 << 16, f32::NAN);
         check(c, 7100 + i as u64);
@@ -363,12 +360,12 @@ fn fast_panels_equal_the_row_loop() {
             continue; // a kernel larger than the padded input
         };
         fast_hits += usize::from(g.ow == g.w && g.sw == 1);
-        // A row of at least 16 valid pixels takes the stride-2 gather and scatter.
+        // A row of enough valid pixels takes the stride-2 gather and scatter.
         stride2_hits += usize::from(
             g.sw == 2
                 && (0..g.kw).any(|j| {
                     let (lo, hi) = g.valid_cols(j);
-                    hi >= lo + 16
+                    hi >= lo + super::panel::PAIRS_MIN_PIXELS
                 }),
         );
         let mut rng = Lcg(ci as u64);
