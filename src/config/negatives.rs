@@ -7,7 +7,8 @@
 //! which change every image they touch (the scene group also swaps surfaces, smears and
 //! framing), these are per-image coin flips from their own RNG stream ("negatives"), so
 //! a share of 0 leaves every render exactly as it was (and its cache key too) and a
-//! share > 0 changes only the images the coin picks. Issue 38 part 2 measured the shares
+//! share > 0 changes only the images the coin picks. A third share replaces renders by
+//! clutter pictures (`render::clutter`): ordinary-photo statistics with no carcass. Issue 38 part 2 measured the shares
 //! (BENCHMARKS.md "Negatives"; `bench/results/negatives/`).
 
 use anyhow::{ensure, Result};
@@ -24,13 +25,22 @@ pub struct Negatives {
     /// one) on and around its pile; independent of `empty`, so an empty image can hold a
     /// glove or a knife.
     pub distractors: f32,
+    /// Probability that a render is replaced by a clutter picture: dead leaves, random
+    /// flat shapes of every size and colour, no carcass (`render::clutter`). Left out of
+    /// the serialised options while 0, so older cache keys stay valid.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub clutter: f32,
+}
+
+fn is_zero(v: &f32) -> bool {
+    *v == 0.0
 }
 
 impl Negatives {
-    /// True when both shares are 0 (renders as before the knob; left out of the render
+    /// True when every share is 0 (renders as before the knob; left out of the render
     /// options' serialisation and so of cache keys).
     pub fn is_off(&self) -> bool {
-        self.empty == 0.0 && self.distractors == 0.0
+        self.empty == 0.0 && self.distractors == 0.0 && self.clutter == 0.0
     }
 
     /// Both shares must be probabilities; the error names the key.
@@ -38,6 +48,7 @@ impl Negatives {
         for (name, p) in [
             ("data.negatives.empty", self.empty),
             ("data.negatives.distractors", self.distractors),
+            ("data.negatives.clutter", self.clutter),
         ] {
             ensure!(
                 (0.0..=1.0).contains(&p),
@@ -60,8 +71,8 @@ mod tests {
         assert!(!n.is_off() && Negatives::default().is_off());
         assert!(toml::from_str::<Negatives>("empy = 0.1").is_err());
         let bad = Negatives {
-            empty: 0.0,
             distractors: 1.5,
+            ..Negatives::default()
         };
         let e = bad.validate().unwrap_err().to_string();
         assert!(
@@ -70,8 +81,16 @@ mod tests {
         );
         let nan = Negatives {
             empty: f32::NAN,
-            distractors: 0.0,
+            ..Negatives::default()
         };
         assert!(nan.validate().is_err());
+        let c: Negatives = toml::from_str("clutter = 0.2").unwrap();
+        assert_eq!(c.clutter, 0.2);
+        assert!(!c.is_off());
+        let e = Negatives { clutter: -0.1, ..c }
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("data.negatives.clutter"), "{e}");
     }
 }

@@ -13,7 +13,8 @@
 //! One concept per file: `carcass` (generator), `glb` (asset I/O), `asset` (the loaded
 //! carcass asset), `mesh`, `skin` (poses), `pile` (heightfield drop), `camera`, `light`,
 //! `surface` (what a material answers), `material` (skin, plate), `line_surface` (belt),
-//! `prop_material` (distractors' look and ids), `distractor` (their meshes), `noise`,
+//! `prop_material` (distractors' look and ids), `distractor` (their meshes), `clutter`
+//! (the negatives knob's dead-leaves pictures), `noise`,
 //! `trace` (BVH rays + shading), `screen` (raster primary visibility, shadow filter,
 //! crevices), `sensor`, `labels`, `scene` (sampling), `preset` (options), `export`
 //! (COCO + preview), `dataset` (a dataset folder), `bench` (render timings), `cache`;
@@ -25,6 +26,7 @@ pub mod bench;
 pub mod cache;
 pub mod camera;
 pub mod carcass;
+pub mod clutter;
 pub mod dataset;
 pub mod distractor;
 pub mod export;
@@ -184,8 +186,12 @@ fn render_traced(
     index: u64,
 ) -> anyhow::Result<(RenderedSample, Vec<u16>)> {
     opts.validate()?;
-    let asset = asset::asset(opts.carcass.as_ref())?;
     let t0 = Instant::now();
+    if let Some(sample) = clutter_sample(opts, seed, index, t0) {
+        let ids = sample.ids.clone();
+        return Ok((sample, ids));
+    }
+    let asset = asset::asset(opts.carcass.as_ref())?;
     let mut rng = image_rng(opts, seed, index);
     let streams = scene::Streams { seed, index };
     let sc = scene::sample(&mut rng, &streams, opts, &asset);
@@ -241,6 +247,39 @@ fn render_traced(
         },
     };
     Ok((sample, traced_ids))
+}
+
+/// The negatives knob's clutter coin, from its own stream: on heads the image is a
+/// dead-leaves picture ([`clutter::dead_leaves`]) with no instance, and no scene is
+/// sampled; a share of 0 never picks one.
+fn clutter_sample(
+    opts: &RenderOptions,
+    seed: u64,
+    index: u64,
+    t0: Instant,
+) -> Option<RenderedSample> {
+    if opts.negatives.clutter <= 0.0 {
+        return None;
+    }
+    let mut rng = group_rng(opts, seed, index, "clutter");
+    if !rand::Rng::random_bool(&mut rng, opts.negatives.clutter as f64) {
+        return None;
+    }
+    let image = clutter::dead_leaves(&mut rng, opts.width, opts.height);
+    let q = opts.jpeg_quality;
+    let jpeg_quality = rand::Rng::random_range(&mut rng, q[0].min(q[1])..=q[1].max(q[0]));
+    Some(RenderedSample {
+        image,
+        ids: vec![0; opts.width as usize * opts.height as usize],
+        instances: Vec::new(),
+        jpeg_quality,
+        density: 0.0,
+        placed: 0,
+        timings: Timings {
+            scene: t0.elapsed(),
+            ..Timings::default()
+        },
+    })
 }
 
 /// Encodes a sample's image in the dataset format; returns (bytes, file extension).
