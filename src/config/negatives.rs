@@ -8,8 +8,8 @@
 //! framing), these are per-image coin flips from their own RNG stream ("negatives"), so
 //! a share of 0 leaves every render exactly as it was (and its cache key too) and a
 //! share > 0 changes only the images the coin picks. A third share replaces renders by
-//! clutter pictures (`render::clutter`): ordinary-photo statistics with no carcass. Issue 38 part 2 measured the shares
-//! (BENCHMARKS.md "Negatives"; `bench/results/negatives/`).
+//! clutter pictures (`render::clutter`): an ordinary photo's shapes, no carcass. Issue 38
+//! part 2 measured the shares (BENCHMARKS.md "Transfer"; `bench/results/negatives/`).
 
 use anyhow::{ensure, Result};
 use serde::{Deserialize, Serialize};
@@ -43,7 +43,7 @@ impl Negatives {
         self.empty == 0.0 && self.distractors == 0.0 && self.clutter == 0.0
     }
 
-    /// Both shares must be probabilities; the error names the key.
+    /// Every share must be a probability; the error names the key.
     pub fn validate(&self) -> Result<()> {
         for (name, p) in [
             ("data.negatives.empty", self.empty),

@@ -186,12 +186,12 @@ fn render_traced(
     index: u64,
 ) -> anyhow::Result<(RenderedSample, Vec<u16>)> {
     opts.validate()?;
-    let t0 = Instant::now();
-    if let Some(sample) = clutter_sample(opts, seed, index, t0) {
+    if let Some(sample) = clutter_sample(opts, seed, index) {
         let ids = sample.ids.clone();
         return Ok((sample, ids));
     }
     let asset = asset::asset(opts.carcass.as_ref())?;
+    let t0 = Instant::now();
     let mut rng = image_rng(opts, seed, index);
     let streams = scene::Streams { seed, index };
     let sc = scene::sample(&mut rng, &streams, opts, &asset);
@@ -251,16 +251,12 @@ fn render_traced(
 
 /// The negatives knob's clutter coin, from its own stream: on heads the image is a
 /// dead-leaves picture ([`clutter::dead_leaves`]) with no instance, and no scene is
-/// sampled; a share of 0 never picks one.
-fn clutter_sample(
-    opts: &RenderOptions,
-    seed: u64,
-    index: u64,
-    t0: Instant,
-) -> Option<RenderedSample> {
+/// sampled (its drawing time is the sample's `scene` time); a share of 0 never picks one.
+fn clutter_sample(opts: &RenderOptions, seed: u64, index: u64) -> Option<RenderedSample> {
     if opts.negatives.clutter <= 0.0 {
         return None;
     }
+    let t0 = Instant::now();
     let mut rng = group_rng(opts, seed, index, "clutter");
     if !rand::Rng::random_bool(&mut rng, opts.negatives.clutter as f64) {
         return None;
