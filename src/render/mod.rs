@@ -56,7 +56,7 @@ pub mod variety;
 use std::time::{Duration, Instant};
 
 use image::RgbImage;
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::util::hash::mix64;
@@ -258,12 +258,11 @@ fn clutter_sample(opts: &RenderOptions, seed: u64, index: u64) -> Option<Rendere
     }
     let t0 = Instant::now();
     let mut rng = group_rng(opts, seed, index, "clutter");
-    if !rand::Rng::random_bool(&mut rng, opts.negatives.clutter as f64) {
+    if !rng.random_bool(opts.negatives.clutter as f64) {
         return None;
     }
     let image = clutter::dead_leaves(&mut rng, opts.width, opts.height);
-    let q = opts.jpeg_quality;
-    let jpeg_quality = rand::Rng::random_range(&mut rng, q[0].min(q[1])..=q[1].max(q[0]));
+    let jpeg_quality = rng.random_range(opts.jpeg_quality_range());
     Some(RenderedSample {
         image,
         ids: vec![0; opts.width as usize * opts.height as usize],

@@ -208,6 +208,13 @@ impl RenderOptions {
         }
     }
 
+    /// The JPEG qualities an image is saved at (rendered scenes and clutter pictures draw
+    /// from it); ordered even for options that skipped `validate`, so a draw never panics.
+    pub fn jpeg_quality_range(&self) -> std::ops::RangeInclusive<u8> {
+        let q = self.jpeg_quality;
+        q[0].min(q[1])..=q[1].max(q[0])
+    }
+
     /// True for the proxy-real preset (label it as a proxy in every report).
     pub fn is_proxy(&self) -> bool {
         self.preset == "proxy-real"

@@ -127,8 +127,7 @@ pub fn sample<R: Rng>(
     }
     let background = floor(rng, &mut scene_rng, groups.scene, opts, &view);
     let mut sensor = sample_sensor(rng, opts, lighting.light_rgb);
-    let q = opts.jpeg_quality;
-    let mut jpeg_quality = rng.random_range(q[0].min(q[1])..=q[1].max(q[0]));
+    let mut jpeg_quality = rng.random_range(opts.jpeg_quality_range());
     if groups.lighting {
         widen_exposure(&mut light_rng, opts, &mut sensor, lighting.light_rgb);
     }
