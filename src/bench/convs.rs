@@ -1,6 +1,7 @@
 //! `chicktrain bench convs`: every convolution shape of YOLO11n-seg and of the compact
 //! Mask R-CNN R18 ([`super::conv_shapes`]) timed alone on flex, the convolution engine of
-//! `vendor/burn-flex` (issue 37) beside the path it replaced, in one process and
+//! `vendor/burn-flex` (issue 37; its Winograd path for the large stride-1 3×3 layers where
+//! flex's dispatch sends them there) beside the path it replaced, in one process and
 //! interleaved (old, new, old, new, …) so both see the same machine load. Three passes per
 //! shape: forward (engine vs the old dispatch of `conv::conv2d_f32`: tiled im2col + gemm,
 //! or its 1×1 / depthwise / small-channel fast paths), input gradient (engine vs Burn's
@@ -102,11 +103,20 @@ fn time_shape(size: usize, c: &ConvShape, batch: usize, repeats: usize) -> Vec<C
     let dy = tensor(&[batch, c.c_out, g.oh, g.ow], &mut rng);
     let gflop = 2.0 * (batch as u64 * c.macs()) as f64 / 1e9;
     let (x, w, dy) = (&x, &w, &dy);
+    // The new side runs what flex's dispatch runs: Winograd for large stride-1 3×3
+    // layers (burn-flex patch 12), the engine otherwise.
+    let winograd = conv_engine::prefers_winograd(&g);
+    let winograd_weight = conv_engine::prefers_winograd_weight_grad(&g);
     let timings = [
         interleaved(
             repeats,
             &|| drop(conv2d_f32(x.clone(), w.clone(), None, &opts)),
-            &|| drop(conv_engine::conv2d(x.clone(), w.clone(), None, &opts)),
+            &|| {
+                let y = winograd
+                    .then(|| conv_engine::conv2d_winograd(x.clone(), w.clone(), None, &opts))
+                    .flatten();
+                drop(y.or_else(|| conv_engine::conv2d(x.clone(), w.clone(), None, &opts)))
+            },
         ),
         interleaved(
             repeats,
@@ -119,12 +129,19 @@ fn time_shape(size: usize, c: &ConvShape, batch: usize, repeats: usize) -> Vec<C
                 ))
             },
             &|| {
-                drop(conv_engine::conv2d_x_backward(
-                    &x_shape,
-                    w.clone(),
-                    dy.clone(),
-                    &opts,
-                ))
+                let dx = winograd
+                    .then(|| {
+                        conv_engine::conv2d_x_backward_winograd(
+                            &x_shape,
+                            w.clone(),
+                            dy.clone(),
+                            &opts,
+                        )
+                    })
+                    .flatten();
+                drop(dx.or_else(|| {
+                    conv_engine::conv2d_x_backward(&x_shape, w.clone(), dy.clone(), &opts)
+                }))
             },
         ),
         interleaved(
@@ -138,12 +155,19 @@ fn time_shape(size: usize, c: &ConvShape, batch: usize, repeats: usize) -> Vec<C
                 ))
             },
             &|| {
-                drop(conv_engine::conv2d_weight_backward(
-                    x.clone(),
-                    &w_shape,
-                    dy.clone(),
-                    &opts,
-                ))
+                let dw = winograd_weight
+                    .then(|| {
+                        conv_engine::conv2d_weight_backward_winograd(
+                            x.clone(),
+                            &w_shape,
+                            dy.clone(),
+                            &opts,
+                        )
+                    })
+                    .flatten();
+                drop(dw.or_else(|| {
+                    conv_engine::conv2d_weight_backward(x.clone(), &w_shape, dy.clone(), &opts)
+                }))
             },
         ),
     ];
@@ -157,7 +181,7 @@ fn time_shape(size: usize, c: &ConvShape, batch: usize, repeats: usize) -> Vec<C
             gflop,
             old_ms,
             new_ms,
-            engine_forward: conv_engine::prefers_forward(&g),
+            engine_forward: conv_engine::prefers_forward(&g) || winograd,
         })
         .collect()
 }
@@ -241,8 +265,11 @@ fn report(rows: &[ConvTiming], args: &ConvsArgs, peak: &Peak, gemm: f64) -> (Str
     );
     let mut md = format!(
         "Batch {}, f32, median of {} interleaved repeats (old, engine, old, …) after one warm-up \
-         each. ratio = old ms ÷ engine ms (> 1: the engine is faster). `fwd→engine`: whether \
-         flex's conv2d dispatches this forward to the engine (otherwise it keeps the old path).\n\n\
+         each. ratio = old ms ÷ engine ms (> 1: the engine is faster). The engine side runs \
+         what flex dispatches to: Winograd F(2×2, 3×3) for stride-1 3×3 layers with at least \
+         192 output tiles (512 for the weight gradient), the im2col engine otherwise. \
+         `fwd→engine`: whether flex's conv2d dispatches this forward to either (otherwise it \
+         keeps the old path).\n\n\
          Peak: {}. A 1024³ f32 matmul through flex reached {gemm:.1} GFLOP/s ({:.0} % of it) \
          in the same run.\n\n\
          | model | size | conv | shape | ×n | pass | old ms | engine ms | old GFLOP/s | engine GFLOP/s | engine % peak | ratio | fwd→engine |\n\

@@ -349,3 +349,94 @@ fn bench_scratch_kept_per_thread() {
         Some(interleaved(&mut step(true), &mut step(false)))
     });
 }
+
+/// Patch 12 alone: the forward, the input gradient, then the weight gradient of every stride-1
+/// 3×3 layer through the im2col engine and through Winograd F(2×2, 3×3),
+/// interleaved, at batch 1 and 8 (the weight transform included on the
+/// Winograd side, as each call pays it).
+/// `cargo test --release --lib conv_engine::bench::bench_winograd -- --ignored --nocapture`
+#[test]
+#[ignore = "benchmark: minutes; run with --ignored --nocapture"]
+fn bench_winograd_forward() {
+    side_by_side(["im2col engine", "winograd"], |g| {
+        if !super::winograd::takes(g) {
+            return None;
+        }
+        let mut seed = 37;
+        let x = tensor([g.batch, g.c_in, g.h, g.w], &mut seed);
+        let w = tensor([g.c_out, g.cpg, g.kh, g.kw], &mut seed);
+        let b = tensor([1, 1, 1, g.c_out], &mut seed);
+        let b = FlexTensor::from_data(TensorData::new(b.storage::<f32>().to_vec(), [g.c_out]));
+        let opts = ConvOptions::new([g.sh, g.sw], [g.ph, g.pw], [g.dh, g.dw], g.groups);
+        let (x, w, b, opts) = (&x, &w, &b, &opts);
+        Some(interleaved(
+            &mut || drop(super::conv2d(x.clone(), w.clone(), Some(b.clone()), opts)),
+            &mut || {
+                drop(super::conv2d_winograd(
+                    x.clone(),
+                    w.clone(),
+                    Some(b.clone()),
+                    opts,
+                ))
+            },
+        ))
+    });
+    side_by_side(["im2col engine x grad", "winograd x grad"], |g| {
+        if !super::winograd::takes(g) {
+            return None;
+        }
+        let mut seed = 37;
+        let x_shape = [g.batch, g.c_in, g.h, g.w];
+        let w = tensor([g.c_out, g.cpg, g.kh, g.kw], &mut seed);
+        let dy = tensor([g.batch, g.c_out, g.oh, g.ow], &mut seed);
+        let opts = ConvOptions::new([g.sh, g.sw], [g.ph, g.pw], [g.dh, g.dw], g.groups);
+        let (w, dy, opts) = (&w, &dy, &opts);
+        Some(interleaved(
+            &mut || {
+                drop(super::conv2d_x_backward(
+                    &x_shape,
+                    w.clone(),
+                    dy.clone(),
+                    opts,
+                ))
+            },
+            &mut || {
+                drop(super::conv2d_x_backward_winograd(
+                    &x_shape,
+                    w.clone(),
+                    dy.clone(),
+                    opts,
+                ))
+            },
+        ))
+    });
+    side_by_side(["im2col engine w grad", "winograd w grad"], |g| {
+        if !super::winograd::takes(g) {
+            return None;
+        }
+        let mut seed = 37;
+        let w_shape = [g.c_out, g.cpg, g.kh, g.kw];
+        let x = tensor([g.batch, g.c_in, g.h, g.w], &mut seed);
+        let dy = tensor([g.batch, g.c_out, g.oh, g.ow], &mut seed);
+        let opts = ConvOptions::new([g.sh, g.sw], [g.ph, g.pw], [g.dh, g.dw], g.groups);
+        let (x, dy, opts) = (&x, &dy, &opts);
+        Some(interleaved(
+            &mut || {
+                drop(super::conv2d_weight_backward(
+                    x.clone(),
+                    &w_shape,
+                    dy.clone(),
+                    opts,
+                ))
+            },
+            &mut || {
+                drop(super::conv2d_weight_backward_winograd(
+                    x.clone(),
+                    &w_shape,
+                    dy.clone(),
+                    opts,
+                ))
+            },
+        ))
+    });
+}

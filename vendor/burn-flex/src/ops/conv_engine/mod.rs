@@ -32,6 +32,7 @@ pub(crate) mod panel;
 pub mod reference;
 #[cfg(test)]
 mod tests;
+pub mod winograd;
 
 use alloc::vec;
 use burn_backend::DType;
@@ -240,6 +241,98 @@ pub fn conv2d(
         }
         _ => return None,
     })
+}
+
+/// Forward 2D convolution through Winograd F(2×2, 3×3) ([`winograd`], patch
+/// 12): f32 stride-1 undilated ungrouped 3×3 convolutions; `None` otherwise.
+pub fn conv2d_winograd(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: &ConvOptions<2>,
+) -> Option<FlexTensor> {
+    let g = Geometry::new(x.layout().shape(), weight.layout().shape(), options)?;
+    let f32s = [Some(&x), Some(&weight), bias.as_ref()];
+    if !winograd::takes(&g) || f32s.iter().flatten().any(|t| t.dtype() != DType::F32) {
+        return None;
+    }
+    let (x, weight) = (x.to_contiguous(), weight.to_contiguous());
+    let bias = bias.map(|b| b.to_contiguous());
+    let u = winograd::forward_weight(&g, weight.storage());
+    let y = winograd::conv2d(&g, x.storage(), &u, bias.as_ref().map(|b| b.storage()));
+    Some(tensor(y, [g.batch, g.c_out, g.oh, g.ow], DType::F32))
+}
+
+/// Gradient of a stride-1 3×3 convolution with respect to its input through
+/// Winograd (patch 12): `dX = dY ⋆ W'`, a "full" convolution of the output
+/// gradient with `W'[ci, co] = W[co, ci]` rotated by 180° at padding `2 − p`.
+/// `None` where [`conv2d_winograd`] would decline the forward, or for padding
+/// above 2.
+pub fn conv2d_x_backward_winograd(
+    x_shape: &[usize],
+    weight: FlexTensor,
+    output_grad: FlexTensor,
+    options: &ConvOptions<2>,
+) -> Option<FlexTensor> {
+    let g = Geometry::new(x_shape, weight.layout().shape(), options)?;
+    let f32s = weight.dtype() == DType::F32 && output_grad.dtype() == DType::F32;
+    if !winograd::takes(&g) || g.ph > 2 || g.pw > 2 || !f32s {
+        return None;
+    }
+    let full = ConvOptions::new([1, 1], [2 - g.ph, 2 - g.pw], [1, 1], 1);
+    let gt = Geometry::new(
+        &[g.batch, g.c_out, g.oh, g.ow],
+        &[g.c_in, g.c_out, 3, 3],
+        &full,
+    )?;
+    debug_assert_eq!((gt.oh, gt.ow), (g.h, g.w));
+    let weight = weight.to_contiguous();
+    let ws: &[f32] = weight.storage();
+    let u = winograd::transform_weight(g.c_in, g.c_out, |ci, co| {
+        let f = &ws[(co * g.c_in + ci) * 9..][..9];
+        core::array::from_fn(|k| f[8 - k])
+    });
+    let dy = output_grad.to_contiguous();
+    let dx = winograd::conv2d(&gt, dy.storage(), &u, None);
+    Some(tensor(dx, [g.batch, g.c_in, g.h, g.w], DType::F32))
+}
+
+/// Gradient of a stride-1 3×3 convolution with respect to its weight through
+/// Winograd (patch 12). `None` where [`conv2d_winograd`] would decline.
+pub fn conv2d_weight_backward_winograd(
+    x: FlexTensor,
+    weight_shape: &[usize],
+    output_grad: FlexTensor,
+    options: &ConvOptions<2>,
+) -> Option<FlexTensor> {
+    let g = Geometry::new(x.layout().shape(), weight_shape, options)?;
+    let f32s = x.dtype() == DType::F32 && output_grad.dtype() == DType::F32;
+    if !winograd::takes(&g) || !f32s {
+        return None;
+    }
+    let (x, dy) = (x.to_contiguous(), output_grad.to_contiguous());
+    let dw = winograd::weight_grad(&g, x.storage(), dy.storage());
+    Some(tensor(dw, [g.c_out, g.c_in, 3, 3], DType::F32))
+}
+
+/// Whether Winograd runs this shape's forward and input gradient: 1.06–2.56×
+/// the im2col engine's speed at 192 tiles (2×2 output pixels) per call and
+/// up, 0.40–1.20× below (`bench.rs`, `bench_winograd`, YOLO11n-seg's layers
+/// at batch 1 and 8; chicktrain's `bench/results/convs/winograd_2026-12-07/`):
+/// with few tiles its 16 small GEMMs per task cost more than they save.
+pub fn prefers_winograd(g: &Geometry) -> bool {
+    winograd::takes(g) && winograd_tiles(g) >= 192
+}
+
+/// Whether Winograd runs this shape's weight gradient: 1.02–1.61× at 512
+/// tiles and up, 0.79–1.68× at 192–511 (same bench); its GEMMs have the tiles
+/// as depth and a `[c_out, c_in]` result per task to add up.
+pub fn prefers_winograd_weight_grad(g: &Geometry) -> bool {
+    winograd::takes(g) && winograd_tiles(g) >= 512
+}
+
+fn winograd_tiles(g: &Geometry) -> usize {
+    g.batch * g.oh.div_ceil(2) * g.ow.div_ceil(2)
 }
 
 /// Gradient of a 2D convolution with respect to its input `[b, c_in, h, w]`

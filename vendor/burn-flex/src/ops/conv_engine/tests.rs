@@ -467,3 +467,140 @@ fn engine_writes_every_element_of_unzeroed_buffers() {
         assert_close("weight grad vs naive", &c, &values(&dw), &dw_ref);
     }
 }
+
+/// Patch 12: Winograd F(2×2, 3×3) forward, input and weight gradients against
+/// the direct f64 loop (the forward also against the im2col engine), with a bias, on odd and even sizes, paddings 0–2, one-row and
+/// one-column images, batches 1–8 and channel counts around the GEMM's
+/// register tiles; every scratch buffer and freed block NaN-filled first, so
+/// an unwritten output element or an unwritten transform entry fails.
+#[test]
+fn winograd_matches_reference() {
+    let mut cases = vec![
+        case([1, 5, 13, 9], 7, 3, 1, 1, 1, 1),
+        case([2, 16, 8, 8], 16, 3, 1, 1, 1, 1),
+        case([1, 3, 1, 9], 4, 3, 1, 1, 1, 1),
+        case([1, 3, 9, 1], 4, 3, 1, 1, 1, 1),
+        case([3, 4, 6, 7], 5, 3, 1, 0, 1, 1),
+        case([1, 6, 5, 4], 3, 3, 1, 2, 1, 1),
+        case([8, 9, 12, 10], 17, 3, 1, 1, 1, 1),
+        case([1, 33, 40, 24], 31, 3, 1, 1, 1, 1),
+    ];
+    let mut rng = Lcg(77);
+    for _ in 0..24 {
+        let (h, w) = (1 + rng.below(14), 1 + rng.below(14));
+        let pad = rng.below(3);
+        if h + 2 * pad < 3 || w + 2 * pad < 3 {
+            continue;
+        }
+        let (c_in, c_out) = (1 + rng.below(20), 1 + rng.below(20));
+        cases.push(case([1 + rng.below(4), c_in, h, w], c_out, 3, 1, pad, 1, 1));
+    }
+    for (i, c) in cases.into_iter().enumerate() {
+        let mut rng = Lcg(12000 + i as u64);
+        let opts = ConvOptions::new(c.stride, c.pad, c.dil, c.groups);
+        let w_shape = [c.c_out, c.x[1], 3, 3];
+        let g = Geometry::new(&c.x, &w_shape, &opts).expect("valid convolution");
+        assert!(super::winograd::takes(&g));
+        let x = rng.vec(c.x.iter().product());
+        let w = rng.vec(w_shape.iter().product());
+        let bias = rng.vec(c.c_out);
+        let dy = rng.vec(g.batch * g.c_out * g.out_plane());
+        let [y_ref, dx_ref, dw_ref] = naive(&c, &g, &x, &w, &dy);
+        let y_ref: Vec<f32> = y_ref
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v + bias[(i / g.out_plane()) % g.c_out])
+            .collect();
+        let (xt, wt) = (t4(x, c.x), t4(w, w_shape));
+        let bt = FlexTensor::new(
+            Bytes::from_elems(bias),
+            Layout::contiguous(Shape::from(vec![c.c_out])),
+            DType::F32,
+        );
+        #[cfg(all(feature = "rayon", feature = "std"))]
+        super::poison_scratch(1 << 16, f32::NAN);
+        poison(y_ref.len());
+        let y = super::conv2d_winograd(xt.clone(), wt.clone(), Some(bt.clone()), &opts).unwrap();
+        assert_finite("winograd", &c, &values(&y));
+        assert_close("winograd vs naive", &c, &values(&y), &y_ref);
+        let engine = super::conv2d(xt.clone(), wt.clone(), Some(bt), &opts).unwrap();
+        assert_close("winograd vs engine", &c, &values(&y), &values(&engine));
+        poison(y_ref.len());
+        let y = super::conv2d_winograd(xt.clone(), wt.clone(), None, &opts).unwrap();
+        assert_finite("winograd, no bias", &c, &values(&y));
+        let dyt = t4(dy, [g.batch, g.c_out, g.oh, g.ow]);
+        poison(dx_ref.len());
+        let dx = super::conv2d_x_backward_winograd(&c.x, wt, dyt.clone(), &opts).unwrap();
+        assert_finite("winograd x grad", &c, &values(&dx));
+        assert_close("winograd x grad vs naive", &c, &values(&dx), &dx_ref);
+        poison(16 * super::backward::WEIGHT_GRAD_CHUNKS * dw_ref.len());
+        let dw = super::conv2d_weight_backward_winograd(xt, &w_shape, dyt, &opts).unwrap();
+        assert_finite("winograd weight grad", &c, &values(&dw));
+        assert_close("winograd weight grad vs naive", &c, &values(&dw), &dw_ref);
+    }
+}
+
+/// Winograd takes only what it computes: no stride, dilation, group or other
+/// kernel size, no dtype but f32, and (input gradient) no padding above 2.
+#[test]
+fn winograd_declines_other_shapes() {
+    let x = t4(vec![0.5; 2 * 4 * 6 * 6], [2, 4, 6, 6]);
+    let w3 = t4(vec![0.5; 4 * 4 * 9], [4, 4, 3, 3]);
+    let declined = [
+        ConvOptions::new([2, 2], [1, 1], [1, 1], 1),
+        ConvOptions::new([1, 1], [2, 2], [2, 2], 1),
+        ConvOptions::new([1, 1], [1, 1], [1, 1], 2),
+    ];
+    for opts in declined {
+        let w = if opts.groups == 2 {
+            t4(vec![0.5; 4 * 2 * 9], [4, 2, 3, 3])
+        } else {
+            w3.clone()
+        };
+        assert!(
+            super::conv2d_winograd(x.clone(), w, None, &opts).is_none(),
+            "{opts:?}"
+        );
+    }
+    let w1 = t4(vec![0.5; 16], [4, 4, 1, 1]);
+    let opts = ConvOptions::new([1, 1], [0, 0], [1, 1], 1);
+    assert!(super::conv2d_winograd(x.clone(), w1, None, &opts).is_none());
+    let opts = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+    let x64 = FlexTensor::new(
+        Bytes::from_elems(vec![0.5f64; 2 * 4 * 6 * 6]),
+        Layout::contiguous(Shape::from(vec![2, 4, 6, 6])),
+        DType::F64,
+    );
+    assert!(super::conv2d_winograd(x64, w3.clone(), None, &opts).is_none());
+    let opts = ConvOptions::new([1, 1], [3, 3], [1, 1], 1);
+    let dy = t4(vec![0.5; 2 * 4 * 10 * 10], [2, 4, 10, 10]);
+    assert!(super::conv2d_winograd(x.clone(), w3.clone(), None, &opts).is_some());
+    assert!(super::conv2d_x_backward_winograd(&[2, 4, 6, 6], w3, dy, &opts).is_none());
+}
+
+/// Patch 12's dispatch: flex's conv2d and both gradients, for a shape with
+/// enough tiles that dispatch prefers Winograd for all three, match the direct
+/// loop.
+#[test]
+fn backend_ops_route_large_3x3_layers_through_winograd() {
+    use crate::Flex;
+    use burn_backend::ops::ModuleOps;
+    let c = case([2, 6, 32, 33], 5, 3, 1, 1, 1, 1);
+    let opts = ConvOptions::new(c.stride, c.pad, c.dil, c.groups);
+    let w_shape = [c.c_out, c.x[1], 3, 3];
+    let g = Geometry::new(&c.x, &w_shape, &opts).unwrap();
+    assert!(super::prefers_winograd(&g) && super::prefers_winograd_weight_grad(&g));
+    let mut rng = Lcg(31);
+    let x = rng.vec(c.x.iter().product());
+    let w = rng.vec(w_shape.iter().product());
+    let dy = rng.vec(g.batch * g.c_out * g.out_plane());
+    let [y_ref, dx_ref, dw_ref] = naive(&c, &g, &x, &w, &dy);
+    let (xt, wt) = (t4(x, c.x), t4(w, w_shape));
+    let dyt = t4(dy, [g.batch, g.c_out, g.oh, g.ow]);
+    let y = Flex::conv2d(xt.clone(), wt.clone(), None, opts.clone());
+    assert_close("conv2d", &c, &values(&y), &y_ref);
+    let dx = Flex::conv2d_x_backward(xt.clone(), wt.clone(), dyt.clone(), opts.clone());
+    assert_close("conv2d_x_backward", &c, &values(&dx), &dx_ref);
+    let dw = Flex::conv2d_weight_backward(xt, wt, dyt, opts);
+    assert_close("conv2d_weight_backward", &c, &values(&dw), &dw_ref);
+}
