@@ -26,8 +26,8 @@ use super::geometry::Geometry;
 use super::{Shared, for_each_task, threads};
 
 /// Tiles (GEMM columns) per task: `V` and `M` of a 64-channel layer then
-/// take 16 · 64 · 192 · 4 B = 768 KiB each; measured against 96 and 384 on
-/// YOLO11n-seg's shapes (`bench.rs`).
+/// take 16 · 64 · 192 · 4 B = 768 KiB each, near a core's L2. Not tuned: no
+/// other value was measured.
 const TILE_TARGET: usize = 192;
 
 /// Whether Winograd F(2×2, 3×3) computes this convolution.
@@ -106,7 +106,8 @@ pub(super) fn conv2d(g: &Geometry, xs: &[f32], u: &[f32], bias: Option<&[f32]>) 
         unsafe { task(g, xs, u, bias, dst, b, r0, r1, scratch) };
     });
     // SAFETY: the tasks cover every tile row of every image, and each writes
-    // every channel of its output rows (`winograd_writes_every_element`).
+    // every channel of its output rows (`winograd_matches_reference` runs on NaN-filled
+    // freed blocks).
     unsafe { out.set_len(len) };
     out
 }
@@ -334,8 +335,7 @@ mod kernels {
                     let a = |i: usize| &rt[(4 * slot[i] + j) * tw..][..tw];
                     let (a0, a1, a2, a3) = (a(0), a(1), a(2), a(3));
                     let at = |i: usize| (4 * i + j) * g.c_in * n + ci * n + col;
-                    let (v0, rest) = v[at(0)..].split_at_mut(tw);
-                    let _ = rest;
+                    let v0 = &mut v[at(0)..][..tw];
                     for t in 0..tw {
                         v0[t] = a0[t] - a2[t];
                     }
