@@ -103,19 +103,18 @@ fn time_shape(size: usize, c: &ConvShape, batch: usize, repeats: usize) -> Vec<C
     let dy = tensor(&[batch, c.c_out, g.oh, g.ow], &mut rng);
     let gflop = 2.0 * (batch as u64 * c.macs()) as f64 / 1e9;
     let (x, w, dy) = (&x, &w, &dy);
-    // The new side runs what flex's dispatch runs: Winograd for large stride-1 3×3
-    // layers (burn-flex patch 12), the engine otherwise.
-    let winograd = conv_engine::prefers_winograd(&g);
-    let winograd_weight = conv_engine::prefers_winograd_weight_grad(&g);
     let timings = [
         interleaved(
             repeats,
             &|| drop(conv2d_f32(x.clone(), w.clone(), None, &opts)),
+            // The new side runs what flex runs (Winograd for large stride-1 3×3 layers).
             &|| {
-                let y = winograd
-                    .then(|| conv_engine::conv2d_winograd(x.clone(), w.clone(), None, &opts))
-                    .flatten();
-                drop(y.or_else(|| conv_engine::conv2d(x.clone(), w.clone(), None, &opts)))
+                drop(conv_engine::conv2d_preferred(
+                    x.clone(),
+                    w.clone(),
+                    None,
+                    &opts,
+                ))
             },
         ),
         interleaved(
@@ -129,19 +128,12 @@ fn time_shape(size: usize, c: &ConvShape, batch: usize, repeats: usize) -> Vec<C
                 ))
             },
             &|| {
-                let dx = winograd
-                    .then(|| {
-                        conv_engine::conv2d_x_backward_winograd(
-                            &x_shape,
-                            w.clone(),
-                            dy.clone(),
-                            &opts,
-                        )
-                    })
-                    .flatten();
-                drop(dx.or_else(|| {
-                    conv_engine::conv2d_x_backward(&x_shape, w.clone(), dy.clone(), &opts)
-                }))
+                drop(conv_engine::conv2d_x_backward_preferred(
+                    &x_shape,
+                    w.clone(),
+                    dy.clone(),
+                    &opts,
+                ))
             },
         ),
         interleaved(
@@ -155,19 +147,12 @@ fn time_shape(size: usize, c: &ConvShape, batch: usize, repeats: usize) -> Vec<C
                 ))
             },
             &|| {
-                let dw = winograd_weight
-                    .then(|| {
-                        conv_engine::conv2d_weight_backward_winograd(
-                            x.clone(),
-                            &w_shape,
-                            dy.clone(),
-                            &opts,
-                        )
-                    })
-                    .flatten();
-                drop(dw.or_else(|| {
-                    conv_engine::conv2d_weight_backward(x.clone(), &w_shape, dy.clone(), &opts)
-                }))
+                drop(conv_engine::conv2d_weight_backward_preferred(
+                    x.clone(),
+                    &w_shape,
+                    dy.clone(),
+                    &opts,
+                ))
             },
         ),
     ];
@@ -181,7 +166,7 @@ fn time_shape(size: usize, c: &ConvShape, batch: usize, repeats: usize) -> Vec<C
             gflop,
             old_ms,
             new_ms,
-            engine_forward: conv_engine::prefers_forward(&g) || winograd,
+            engine_forward: conv_engine::prefers_forward(&g),
         })
         .collect()
 }

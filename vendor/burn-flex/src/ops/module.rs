@@ -112,24 +112,10 @@ impl ModuleOps<Flex> for Flex {
                     weight.layout().shape(),
                     &options,
                 );
-                // Large stride-1 3×3 layers through Winograd (patch 12), which
-                // declines a weight or bias of another dtype.
-                let winograd = geometry
-                    .filter(conv_engine::prefers_winograd)
-                    .and_then(|_| {
-                        conv_engine::conv2d_winograd(
-                            x.clone(),
-                            weight.clone(),
-                            bias.clone(),
-                            &options,
-                        )
-                    });
-                if let Some(y) = winograd {
-                    return y;
-                }
                 match geometry {
+                    // Large stride-1 3×3 layers (all k×k) through Winograd (patch 12).
                     Some(g) if conv_engine::prefers_forward(&g) => {
-                        conv_engine::conv2d(x, weight, bias, &options)
+                        conv_engine::conv2d_preferred(x, weight, bias, &options)
                             .expect("conv_engine takes every shape Geometry accepts")
                     }
                     _ => conv::conv2d_f32(x, weight, bias, &options),
@@ -155,23 +141,11 @@ impl ModuleOps<Flex> for Flex {
         let (padded, sym) = pad_asymmetric_conv_input::<Flex, 2>(x, options.clone());
         let dtype = output_grad.dtype();
         let padded_shape = padded.layout().shape().clone();
-        let winograd = conv_engine::Geometry::new(&padded_shape, weight.layout().shape(), &sym)
-            .filter(conv_engine::prefers_winograd)
-            .and_then(|_| {
-                conv_engine::conv2d_x_backward_winograd(
-                    &padded_shape,
-                    weight.clone(),
-                    output_grad.clone(),
-                    &sym,
-                )
-            });
         // The engine declines only shapes the forward pass already rejected and
         // empty batches/outputs, whose gradient is zero.
-        let grad = match winograd {
-            Some(grad) => grad,
-            None => conv_engine::conv2d_x_backward(&padded_shape, weight, output_grad, &sym)
-                .unwrap_or_else(|| FlexTensor::zeros(padded_shape, dtype)),
-        };
+        let grad =
+            conv_engine::conv2d_x_backward_preferred(&padded_shape, weight, output_grad, &sym)
+                .unwrap_or_else(|| FlexTensor::zeros(padded_shape, dtype));
         if !options.is_asymmetric() {
             return grad;
         }
@@ -196,21 +170,8 @@ impl ModuleOps<Flex> for Flex {
         let (padded, sym) = pad_asymmetric_conv_input::<Flex, 2>(x, options);
         let w_shape = weight.layout().shape().clone();
         let dtype = weight.dtype();
-        let winograd = conv_engine::Geometry::new(padded.layout().shape(), &w_shape, &sym)
-            .filter(conv_engine::prefers_winograd_weight_grad)
-            .and_then(|_| {
-                conv_engine::conv2d_weight_backward_winograd(
-                    padded.clone(),
-                    &w_shape,
-                    output_grad.clone(),
-                    &sym,
-                )
-            });
-        if let Some(grad) = winograd {
-            return grad;
-        }
         // Declined shapes: see `conv2d_x_backward`.
-        conv_engine::conv2d_weight_backward(padded, &w_shape, output_grad, &sym)
+        conv_engine::conv2d_weight_backward_preferred(padded, &w_shape, output_grad, &sym)
             .unwrap_or_else(|| FlexTensor::zeros(w_shape, dtype))
     }
 

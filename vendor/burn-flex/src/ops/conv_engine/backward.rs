@@ -175,30 +175,51 @@ pub(crate) fn weight_grad_with<T: Elem>(
     let len = g.c_out * g.k();
     let tiles = g.tiles(1);
     let tasks = g.batch * tiles.len();
-    let chunks = WEIGHT_GRAD_CHUNKS.min(tasks);
-    let mut partials: Vec<T> = Vec::with_capacity(chunks * len);
-    let dst = Shared(partials.as_mut_ptr());
-    for_each_task(chunks, |c, panel: &mut Vec<T>| {
-        // Every chunk has at least one task (chunks ≤ tasks); its first
-        // overwrites the chunk's partial sums, the rest add to them.
-        let first = c * tasks / chunks;
-        for t in first..(c + 1) * tasks / chunks {
+    // SAFETY: a task writes the groups' `[mpg, k]` blocks, which tile the
+    // `len` sums of `[c_out, k]`, and nothing else.
+    unsafe {
+        chunked_sum(tasks, len, |t, acc: Shared<T>, first, panel| {
             let (r0, r1) = tiles[t % tiles.len()];
             for grp in 0..g.groups {
-                // SAFETY: chunk `c` alone writes its `len` partial sums.
-                let acc = unsafe { dst.at(c * len + grp * g.mpg * g.k()) };
+                let acc = acc.at(grp * g.mpg * g.k());
                 let tile = Tile {
                     b: t / tiles.len(),
                     grp,
                     r0,
                     r1,
                 };
-                unsafe { weight_tile(g, xs, dys, tile, acc, t == first, panel, layout) };
+                weight_tile(g, xs, dys, tile, acc, first, panel, layout);
             }
+        })
+    }
+}
+
+/// `len` sums over `tasks` tasks, computed as at most [`WEIGHT_GRAD_CHUNKS`]
+/// partial sums in parallel and added in chunk order: the tasks are cut into
+/// chunks independently of the thread count, so the result is reproducible.
+/// `f(task, acc, first, scratch)` adds the task's terms to the `len` values at
+/// `acc`, or writes them there when `first` (the chunk's first task).
+///
+/// # Safety
+/// `f` with `first` writes every one of the `len` values at `acc`, and `f`
+/// writes nothing outside them.
+pub(super) unsafe fn chunked_sum<T: Elem, F>(tasks: usize, len: usize, f: F) -> Vec<T>
+where
+    F: Fn(usize, Shared<T>, bool, &mut Vec<T>) + Send + Sync,
+{
+    let chunks = WEIGHT_GRAD_CHUNKS.min(tasks);
+    let mut partials: Vec<T> = Vec::with_capacity(chunks * len);
+    let dst = Shared(partials.as_mut_ptr());
+    for_each_task(chunks, |c, scratch: &mut Vec<T>| {
+        // Every chunk has at least one task (chunks ≤ tasks); its first
+        // overwrites the chunk's partial sums, the rest add to them.
+        let first = c * tasks / chunks;
+        for t in first..(c + 1) * tasks / chunks {
+            // SAFETY: chunk `c` alone owns these `len` partial sums.
+            f(t, Shared(unsafe { dst.at(c * len) }), t == first, scratch);
         }
     });
-    // SAFETY: each chunk's first task wrote all `len` of its sums (the
-    // groups' blocks tile `[c_out, k]`).
+    // SAFETY: each chunk's first task wrote all `len` of its sums (the caller's contract).
     unsafe { partials.set_len(chunks * len) };
     let (first, rest) = partials.split_at_mut(len);
     for part in rest.chunks_exact(len) {

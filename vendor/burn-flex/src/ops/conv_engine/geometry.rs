@@ -121,12 +121,7 @@ impl Geometry {
     /// that there are at least two tiles per worker thread when the batch is
     /// smaller than that (batch-1 inference must still use every core).
     pub fn rows_per_tile(&self, threads: usize) -> usize {
-        let mut rows = (TILE_COLS / self.ow).clamp(1, self.oh);
-        let want_tiles = (2 * threads).div_ceil(self.batch);
-        if self.oh.div_ceil(rows) < want_tiles {
-            rows = self.oh.div_ceil(want_tiles).max(1);
-        }
-        rows
+        rows_per_task(self.oh, self.ow, TILE_COLS, self.batch, threads)
     }
 
     /// The tiles as `(first_row, end_row)` half-open ranges of output rows.
@@ -161,4 +156,24 @@ impl Geometry {
         let ih = (r * self.sh + i * self.dh).checked_sub(self.ph)?;
         (ih < self.h).then_some(ih)
     }
+}
+
+/// Rows per task when each of `batch` images has `rows` rows of `row_len`
+/// columns to cut into tasks of about `target` columns: at least one row, and
+/// few enough rows that there are at least two tasks per worker thread when
+/// the batch alone does not give that many (batch-1 inference must still use
+/// every core). The engine's tiles and Winograd's tile-row runs both use it.
+pub(crate) fn rows_per_task(
+    rows: usize,
+    row_len: usize,
+    target: usize,
+    batch: usize,
+    threads: usize,
+) -> usize {
+    let mut per_task = (target / row_len).clamp(1, rows);
+    let want = (2 * threads).div_ceil(batch);
+    if rows.div_ceil(per_task) < want {
+        per_task = rows.div_ceil(want).max(1);
+    }
+    per_task
 }

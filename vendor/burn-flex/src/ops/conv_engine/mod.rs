@@ -335,6 +335,55 @@ fn winograd_tiles(g: &Geometry) -> usize {
     g.batch * g.oh.div_ceil(2) * g.ow.div_ceil(2)
 }
 
+/// The forward as flex runs a shape it gives the engine: Winograd where
+/// [`prefers_winograd`] (and it takes the dtypes), the im2col engine otherwise.
+/// `None` where [`Geometry::new`] rejects the shape.
+pub fn conv2d_preferred(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: &ConvOptions<2>,
+) -> Option<FlexTensor> {
+    let g = Geometry::new(x.layout().shape(), weight.layout().shape(), options)?;
+    prefers_winograd(&g)
+        .then(|| conv2d_winograd(x.clone(), weight.clone(), bias.clone(), options))
+        .flatten()
+        .or_else(|| conv2d(x, weight, bias, options))
+}
+
+/// The input gradient as flex runs it: Winograd where [`prefers_winograd`]
+/// (and it takes the padding and dtypes), the engine otherwise.
+pub fn conv2d_x_backward_preferred(
+    x_shape: &[usize],
+    weight: FlexTensor,
+    output_grad: FlexTensor,
+    options: &ConvOptions<2>,
+) -> Option<FlexTensor> {
+    let g = Geometry::new(x_shape, weight.layout().shape(), options)?;
+    prefers_winograd(&g)
+        .then(|| conv2d_x_backward_winograd(x_shape, weight.clone(), output_grad.clone(), options))
+        .flatten()
+        .or_else(|| conv2d_x_backward(x_shape, weight, output_grad, options))
+}
+
+/// The weight gradient as flex runs it: Winograd where
+/// [`prefers_winograd_weight_grad`] (and it takes the dtypes), the engine
+/// otherwise.
+pub fn conv2d_weight_backward_preferred(
+    x: FlexTensor,
+    weight_shape: &[usize],
+    output_grad: FlexTensor,
+    options: &ConvOptions<2>,
+) -> Option<FlexTensor> {
+    let g = Geometry::new(x.layout().shape(), weight_shape, options)?;
+    prefers_winograd_weight_grad(&g)
+        .then(|| {
+            conv2d_weight_backward_winograd(x.clone(), weight_shape, output_grad.clone(), options)
+        })
+        .flatten()
+        .or_else(|| conv2d_weight_backward(x, weight_shape, output_grad, options))
+}
+
 /// Gradient of a 2D convolution with respect to its input `[b, c_in, h, w]`
 /// (`x_shape`), from the weight and the output gradient. Symmetric padding
 /// only (the caller pads asymmetric inputs explicitly); `None` otherwise.

@@ -21,8 +21,8 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
-use super::backward::WEIGHT_GRAD_CHUNKS;
-use super::geometry::Geometry;
+use super::backward::chunked_sum;
+use super::geometry::{Geometry, rows_per_task};
 use super::{Shared, for_each_task, threads};
 
 /// Tiles (GEMM columns) per task: `V` and `M` of a 64-channel layer then
@@ -76,23 +76,12 @@ pub(super) fn forward_weight(g: &Geometry, ws: &[f32]) -> Vec<f32> {
     })
 }
 
-/// Tile rows per task: about [`TILE_TARGET`] tiles, and at least two tasks per
-/// worker thread when the batch alone does not give that many.
-fn rows_per_task(tiles_h: usize, tiles_w: usize, batch: usize, threads: usize) -> usize {
-    let mut rows = (TILE_TARGET / tiles_w).clamp(1, tiles_h);
-    let want = (2 * threads).div_ceil(batch);
-    if tiles_h.div_ceil(rows) < want {
-        rows = tiles_h.div_ceil(want).max(1);
-    }
-    rows
-}
-
 /// Output `[batch, c_out, oh, ow]` of the convolution `g` of `xs` with the
 /// transformed weight `u` ([`transform_weight`]), plus `bias` per channel.
 pub(super) fn conv2d(g: &Geometry, xs: &[f32], u: &[f32], bias: Option<&[f32]>) -> Vec<f32> {
     debug_assert!(takes(g));
     let (th, tw) = (g.oh.div_ceil(2), g.ow.div_ceil(2));
-    let rows = rows_per_task(th, tw, g.batch, threads());
+    let rows = rows_per_task(th, tw, TILE_TARGET, g.batch, threads());
     let chunks = th.div_ceil(rows);
     let len = g.batch * g.c_out * g.out_plane();
     let mut out: Vec<f32> = Vec::with_capacity(len);
@@ -116,47 +105,35 @@ pub(super) fn conv2d(g: &Geometry, xs: &[f32], u: &[f32], bias: Option<&[f32]>) 
 /// `xs` and output gradient `dys`: `dW = Gᵀ (Σ_tiles (A dY Aᵀ) ⊙ (Bᵀ d B)) G`,
 /// the transpose of the forward's chain. Per task, 16 GEMMs
 /// `dU_k[c_out, c_in] += dM_k[c_out, n] · V_kᵀ[n, c_in]` with the tiles as
-/// depth; tasks are grouped into at most [`WEIGHT_GRAD_CHUNKS`] partial sums,
+/// depth; tasks are grouped by [`chunked_sum`] into at most 8 partial sums,
 /// added in order at the end (the result does not depend on the thread count).
 pub(super) fn weight_grad(g: &Geometry, xs: &[f32], dys: &[f32]) -> Vec<f32> {
     debug_assert!(takes(g));
     let (th, tw) = (g.oh.div_ceil(2), g.ow.div_ceil(2));
-    let rows = rows_per_task(th, tw, g.batch, 1);
+    let rows = rows_per_task(th, tw, TILE_TARGET, g.batch, 1);
     let per_image = th.div_ceil(rows);
     let tasks = g.batch * per_image;
-    let chunks = WEIGHT_GRAD_CHUNKS.min(tasks);
     let plane = g.c_out * g.c_in;
-    let len = 16 * plane;
-    let mut partials: Vec<f32> = Vec::with_capacity(chunks * len);
-    let dst = Shared(partials.as_mut_ptr());
-    for_each_task(chunks, |c, scratch: &mut Vec<f32>| {
-        let first = c * tasks / chunks;
-        for t in first..(c + 1) * tasks / chunks {
+    // SAFETY: a task writes (first) or adds to the 16 `[c_out, c_in]` blocks of
+    // `dU` at `acc` and nothing else.
+    let du = unsafe {
+        chunked_sum(tasks, 16 * plane, |t, acc: Shared<f32>, first, scratch| {
             let (b, r0) = (t / per_image, (t % per_image) * rows);
             let r1 = (r0 + rows).min(th);
-            // SAFETY: chunk `c` alone writes its `len` partial sums; its first
-            // task overwrites them.
-            unsafe { weight_task(g, xs, dys, dst.at(c * len), t == first, b, r0, r1, scratch) };
-        }
-    });
-    // SAFETY: each chunk's first task wrote all of its partial sums.
-    unsafe { partials.set_len(chunks * len) };
-    let (du, rest) = partials.split_at_mut(len);
-    for part in rest.chunks_exact(len) {
-        for (a, &p) in du.iter_mut().zip(part) {
-            *a += p;
-        }
-    }
+            weight_task(g, xs, dys, acc.0, first, b, r0, r1, scratch);
+        })
+    };
     // dW = Gᵀ dU G, Gᵀ = [[1, ½, ½, 0], [0, ½, −½, 0], [0, ½, ½, 1]].
     let mut dw = vec![0f32; plane * 9];
     for (at, out) in dw.chunks_exact_mut(9).enumerate() {
         let d = |i: usize, j: usize| du[(4 * i + j) * plane + at];
-        let mut t = [[0f32; 4]; 3];
-        for (j, col) in (0..4).map(|j| (j, [d(0, j), d(1, j), d(2, j), d(3, j)])) {
-            t[0][j] = col[0] + 0.5 * (col[1] + col[2]);
-            t[1][j] = 0.5 * (col[1] - col[2]);
-            t[2][j] = 0.5 * (col[1] + col[2]) + col[3];
-        }
+        // Column j of dU, then t = Gᵀ dU (3×4) one column at a time.
+        let cols: [[f32; 4]; 4] = core::array::from_fn(|j| [d(0, j), d(1, j), d(2, j), d(3, j)]);
+        let t = [
+            cols.map(|c| c[0] + 0.5 * (c[1] + c[2])),
+            cols.map(|c| 0.5 * (c[1] - c[2])),
+            cols.map(|c| 0.5 * (c[1] + c[2]) + c[3]),
+        ];
         for (a, r) in t.iter().enumerate() {
             out[3 * a] = r[0] + 0.5 * (r[1] + r[2]);
             out[3 * a + 1] = 0.5 * (r[1] - r[2]);
