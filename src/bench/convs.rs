@@ -114,6 +114,7 @@ fn time_shape(size: usize, c: &ConvShape, batch: usize, repeats: usize) -> Vec<C
                     w.clone(),
                     None,
                     &opts,
+                    conv_engine::Activation::Identity,
                 ))
             },
         ),

@@ -32,6 +32,7 @@
 pub mod detection;
 pub mod family;
 pub mod freeze;
+pub mod fused_conv;
 pub mod instance_mask;
 pub mod layers;
 pub mod loss;

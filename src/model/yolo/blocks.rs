@@ -16,6 +16,7 @@ use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d};
 use burn::tensor::activation::silu;
 use burn::tensor::{Device, Tensor};
 
+use crate::model::fused_conv::conv_silu;
 use crate::model::layers::conv_macs;
 #[cfg(test)]
 use crate::model::layers::trainable_params;
@@ -99,6 +100,15 @@ impl ConvBn {
     /// # Shapes
     /// - `x`: `[B, c_in, H, W]` → `[B, c_out, H', W']`, `H' = (H + 2(k/2) − k)/s + 1`
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        // Folded and activated: one flex convolution with a SiLU epilogue (inference only).
+        let x = if self.fused && self.act {
+            match conv_silu(&self.conv, x) {
+                Ok(y) => return y,
+                Err(x) => x,
+            }
+        } else {
+            x
+        };
         let y = self.conv.forward(x);
         let y = if self.fused { y } else { self.bn.forward(y) };
         if self.act {

@@ -124,3 +124,7 @@ pub mod sort;
 mod transaction;
 pub mod unary;
 pub mod unfold;
+
+/// A convolution with a fused activation (patch 13), for callers holding flex
+/// tensors; Burn's `ModuleOps` has no such op.
+pub use module::conv2d_activated;

@@ -2,7 +2,10 @@
 //!
 //! These operations power neural network modules like convolutions and pooling.
 
-use crate::ops::{batch_norm, conv, conv_engine, conv_transpose, deform_conv, interpolate, pool};
+use crate::ops::conv_engine::Activation;
+use crate::ops::{
+    batch_norm, conv, conv_engine, conv_transpose, deform_conv, interpolate, pool, sigmoid,
+};
 use crate::{Flex, FlexTensor, Layout};
 use burn_backend::{
     DType, Element, TensorMetadata,
@@ -41,6 +44,71 @@ pub(crate) fn cast_from_f32<E: Element + Pod + Copy>(
     let half_data: alloc::vec::Vec<E> = data.iter().map(|&v| from_f32(v)).collect();
     let bytes = Bytes::from_elems(half_data);
     FlexTensor::new(bytes, Layout::contiguous(shape), E::dtype())
+}
+
+/// A 2D convolution followed by `act`, as flex runs it (`ModuleOps::conv2d`
+/// is this with [`Activation::Identity`]). Burn has no op for a convolution
+/// with an activation; a caller holding flex tensors at inference calls this
+/// to have the activation applied to each output tile while it is in cache
+/// (patch 13, [`conv_engine::epilogue`]).
+///
+/// f32 shapes the engine runs, and with an activation also 1×1 stride-1 ones
+/// (whose epilogue then saves a pass; without one they keep the old 1×1 GEMM,
+/// measured as fast), get the epilogue; the rest (depthwise, other dtypes) run
+/// the plain convolution and then the activation in place.
+pub fn conv2d_activated(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: ConvOptions<2>,
+    act: Activation,
+) -> FlexTensor {
+    let (x, options) = pad_asymmetric_conv_input::<Flex, 2>(x, options);
+    let y = match x.dtype() {
+        DType::F32 => {
+            let geometry =
+                conv_engine::Geometry::new(x.layout().shape(), weight.layout().shape(), &options);
+            match geometry {
+                // Large stride-1 3×3 layers (all k×k) through Winograd (patch 12).
+                Some(g)
+                    if conv_engine::prefers_forward(&g)
+                        || (act != Activation::Identity && g.is_pointwise()) =>
+                {
+                    return conv_engine::conv2d_preferred(x, weight, bias, &options, act)
+                        .expect("conv_engine takes every shape Geometry accepts");
+                }
+                _ => conv::conv2d_f32(x, weight, bias, &options),
+            }
+        }
+        DType::F64 => conv::conv2d_f64(x, weight, bias, &options),
+        DType::F16 => conv::conv2d_f16(x, weight, bias, &options),
+        DType::BF16 => conv::conv2d_bf16(x, weight, bias, &options),
+        dtype => panic!("conv2d: unsupported dtype {:?}", dtype),
+    };
+    activate(y, act)
+}
+
+/// `act` over a whole tensor: in place for f32 (the same kernel as the
+/// epilogue), Burn's composition for other dtypes.
+fn activate(y: FlexTensor, act: Activation) -> FlexTensor {
+    match act {
+        Activation::Identity => y,
+        Activation::Silu if y.dtype() == DType::F32 => {
+            let mut y = y.into_contiguous();
+            let (start, end) = y
+                .layout()
+                .contiguous_offsets()
+                .expect("into_contiguous gives a contiguous layout");
+            // A fresh convolution output: its buffer is not shared (else
+            // `storage_mut` would copy it first).
+            sigmoid::kernels::silu_inplace(&mut y.storage_mut::<f32>()[start..end]);
+            y
+        }
+        Activation::Silu => {
+            use burn_backend::ops::ActivationOps;
+            Flex::float_mul(y.clone(), Flex::sigmoid(y))
+        }
+    }
 }
 
 impl ModuleOps<Flex> for Flex {
@@ -104,28 +172,7 @@ impl ModuleOps<Flex> for Flex {
         bias: Option<FloatTensor<Flex>>,
         options: ConvOptions<2>,
     ) -> FloatTensor<Flex> {
-        let (x, options) = pad_asymmetric_conv_input::<Flex, 2>(x, options);
-        match x.dtype() {
-            DType::F32 => {
-                let geometry = conv_engine::Geometry::new(
-                    x.layout().shape(),
-                    weight.layout().shape(),
-                    &options,
-                );
-                match geometry {
-                    // Large stride-1 3×3 layers (all k×k) through Winograd (patch 12).
-                    Some(g) if conv_engine::prefers_forward(&g) => {
-                        conv_engine::conv2d_preferred(x, weight, bias, &options)
-                            .expect("conv_engine takes every shape Geometry accepts")
-                    }
-                    _ => conv::conv2d_f32(x, weight, bias, &options),
-                }
-            }
-            DType::F64 => conv::conv2d_f64(x, weight, bias, &options),
-            DType::F16 => conv::conv2d_f16(x, weight, bias, &options),
-            DType::BF16 => conv::conv2d_bf16(x, weight, bias, &options),
-            dtype => panic!("conv2d: unsupported dtype {:?}", dtype),
-        }
+        conv2d_activated(x, weight, bias, options, Activation::Identity)
     }
 
     /// Through `conv_engine` (chicktrain issue 37) instead of Burn's default

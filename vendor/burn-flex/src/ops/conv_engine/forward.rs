@@ -1,9 +1,11 @@
 //! Forward pass: per (image, tile of output rows, group), one GEMM
 //! `out[mpg, n] (+)= W_g[mpg, k] · panel[k, n]` written straight into the NCHW
-//! output, with the bias as the GEMM's initial accumulator.
+//! output, with the bias as the GEMM's initial accumulator and the activation
+//! applied to the rows it wrote ([`Activation`], patch 13).
 
 use alloc::vec::Vec;
 
+use super::epilogue::Activation;
 use super::geometry::Geometry;
 use super::panel::im2col_rows;
 use super::{Elem, Shared, for_each_task, threads};
@@ -15,6 +17,7 @@ pub(super) fn conv2d<T: Elem>(
     x: FlexTensor,
     weight: FlexTensor,
     bias: Option<FlexTensor>,
+    act: Activation,
 ) -> Vec<T> {
     let x = x.to_contiguous();
     let weight = weight.to_contiguous();
@@ -43,7 +46,7 @@ pub(super) fn conv2d<T: Elem>(
         for grp in 0..g.groups {
             // SAFETY: tasks write disjoint (image, row-range) blocks of `out`,
             // which outlives `for_each_task`.
-            unsafe { tile(g, xs, ws, dst, b, grp, r0, r1, with_bias, panel) };
+            unsafe { tile(g, xs, ws, dst, b, grp, r0, r1, with_bias, act, panel) };
         }
     });
     // SAFETY: every element is initialised, by the bias fill or by the GEMMs
@@ -68,6 +71,7 @@ unsafe fn tile<T: Elem>(
     r0: usize,
     r1: usize,
     accumulate: bool,
+    act: Activation,
     panel: &mut Vec<T>,
 ) {
     let k = g.k();
@@ -103,5 +107,14 @@ unsafe fn tile<T: Elem>(
             false,
             gemm::Parallelism::None,
         );
+    }
+    if act != Activation::Identity {
+        for c in 0..g.mpg {
+            // SAFETY: row range `r0..r1` of channel `c` of this (image, group)
+            // is this task's (the caller's contract), just written above.
+            let row =
+                unsafe { core::slice::from_raw_parts_mut(dst.at(out_off + c * g.out_plane()), n) };
+            act.apply(row);
+        }
     }
 }

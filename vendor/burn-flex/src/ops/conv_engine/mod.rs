@@ -26,6 +26,7 @@
 mod backward;
 #[cfg(all(test, feature = "std"))]
 mod bench;
+pub mod epilogue;
 mod forward;
 pub mod geometry;
 pub(crate) mod panel;
@@ -40,6 +41,7 @@ use burn_backend::ops::ConvOptions;
 use burn_std::{Bytes, Shape, f16};
 
 use crate::{FlexTensor, Layout};
+pub use epilogue::Activation;
 pub use geometry::Geometry;
 
 /// Element types the engine computes in natively (the `gemm` crate's types).
@@ -48,21 +50,40 @@ pub(crate) trait Elem:
 {
     const ZERO: Self;
     const ONE: Self;
+
+    /// `xs[i] = xs[i] · sigmoid(xs[i])` on this thread ([`Activation::Silu`]).
+    fn silu_inplace(xs: &mut [Self]);
 }
 
 impl Elem for f32 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+
+    fn silu_inplace(xs: &mut [Self]) {
+        super::sigmoid::kernels::silu_inplace_serial(xs)
+    }
 }
 
 impl Elem for f64 {
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
+
+    fn silu_inplace(xs: &mut [Self]) {
+        for x in xs {
+            *x *= 1.0 / (1.0 + (-*x).exp());
+        }
+    }
 }
 
 impl Elem for f16 {
     const ZERO: Self = f16::ZERO;
     const ONE: Self = f16::ONE;
+
+    fn silu_inplace(xs: &mut [Self]) {
+        for x in xs {
+            *x = f16::from_f32(super::sigmoid::kernels::silu_f32(x.to_f32()));
+        }
+    }
 }
 
 /// A raw output pointer shared by tasks that write disjoint ranges.
@@ -228,15 +249,39 @@ pub fn conv2d(
     bias: Option<FlexTensor>,
     options: &ConvOptions<2>,
 ) -> Option<FlexTensor> {
+    conv2d_activated(x, weight, bias, options, Activation::Identity)
+}
+
+/// [`conv2d`] followed by `act`, applied by each task to the output rows it
+/// has just written (patch 13; bf16 in f32 before rounding).
+pub fn conv2d_activated(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: &ConvOptions<2>,
+    act: Activation,
+) -> Option<FlexTensor> {
     let g = Geometry::new(x.layout().shape(), weight.layout().shape(), options)?;
     let out = [g.batch, g.c_out, g.oh, g.ow];
     Some(match x.dtype() {
-        DType::F32 => tensor(forward::conv2d::<f32>(&g, x, weight, bias), out, DType::F32),
-        DType::F64 => tensor(forward::conv2d::<f64>(&g, x, weight, bias), out, DType::F64),
-        DType::F16 => tensor(forward::conv2d::<f16>(&g, x, weight, bias), out, DType::F16),
+        DType::F32 => tensor(
+            forward::conv2d::<f32>(&g, x, weight, bias, act),
+            out,
+            DType::F32,
+        ),
+        DType::F64 => tensor(
+            forward::conv2d::<f64>(&g, x, weight, bias, act),
+            out,
+            DType::F64,
+        ),
+        DType::F16 => tensor(
+            forward::conv2d::<f16>(&g, x, weight, bias, act),
+            out,
+            DType::F16,
+        ),
         DType::BF16 => {
             let up = |t: FlexTensor| super::conv_common::convert_bf16_to_f32(&t);
-            let y = forward::conv2d::<f32>(&g, up(x), up(weight), bias.map(up));
+            let y = forward::conv2d::<f32>(&g, up(x), up(weight), bias.map(up), act);
             super::conv_common::convert_f32_to_bf16(&tensor(y, out, DType::F32))
         }
         _ => return None,
@@ -251,6 +296,18 @@ pub fn conv2d_winograd(
     bias: Option<FlexTensor>,
     options: &ConvOptions<2>,
 ) -> Option<FlexTensor> {
+    conv2d_winograd_activated(x, weight, bias, options, Activation::Identity)
+}
+
+/// [`conv2d_winograd`] followed by `act`, applied by each task to the output
+/// rows it has just written (patch 13).
+pub fn conv2d_winograd_activated(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: &ConvOptions<2>,
+    act: Activation,
+) -> Option<FlexTensor> {
     let g = Geometry::new(x.layout().shape(), weight.layout().shape(), options)?;
     let f32s = [Some(&x), Some(&weight), bias.as_ref()];
     if !winograd::takes(&g) || f32s.iter().flatten().any(|t| t.dtype() != DType::F32) {
@@ -259,7 +316,7 @@ pub fn conv2d_winograd(
     let (x, weight) = (x.to_contiguous(), weight.to_contiguous());
     let bias = bias.map(|b| b.to_contiguous());
     let u = winograd::forward_weight(&g, weight.storage());
-    let y = winograd::conv2d(&g, x.storage(), &u, bias.as_ref().map(|b| b.storage()));
+    let y = winograd::conv2d(&g, x.storage(), &u, bias.as_ref().map(|b| b.storage()), act);
     Some(tensor(y, [g.batch, g.c_out, g.oh, g.ow], DType::F32))
 }
 
@@ -293,7 +350,7 @@ pub fn conv2d_x_backward_winograd(
         core::array::from_fn(|k| f[8 - k])
     });
     let dy = output_grad.to_contiguous();
-    let dx = winograd::conv2d(&gt, dy.storage(), &u, None);
+    let dx = winograd::conv2d(&gt, dy.storage(), &u, None, Activation::Identity);
     Some(tensor(dx, [g.batch, g.c_in, g.h, g.w], DType::F32))
 }
 
@@ -335,20 +392,21 @@ fn winograd_tiles(g: &Geometry) -> usize {
     g.batch * g.oh.div_ceil(2) * g.ow.div_ceil(2)
 }
 
-/// The forward as flex runs a shape it gives the engine: Winograd where
-/// [`prefers_winograd`] (and it takes the dtypes), the im2col engine otherwise.
-/// `None` where [`Geometry::new`] rejects the shape.
+/// The forward as flex runs a shape it gives the engine, followed by `act`:
+/// Winograd where [`prefers_winograd`] (and it takes the dtypes), the im2col
+/// engine otherwise. `None` where [`Geometry::new`] rejects the shape.
 pub fn conv2d_preferred(
     x: FlexTensor,
     weight: FlexTensor,
     bias: Option<FlexTensor>,
     options: &ConvOptions<2>,
+    act: Activation,
 ) -> Option<FlexTensor> {
     let g = Geometry::new(x.layout().shape(), weight.layout().shape(), options)?;
     prefers_winograd(&g)
-        .then(|| conv2d_winograd(x.clone(), weight.clone(), bias.clone(), options))
+        .then(|| conv2d_winograd_activated(x.clone(), weight.clone(), bias.clone(), options, act))
         .flatten()
-        .or_else(|| conv2d(x, weight, bias, options))
+        .or_else(|| conv2d_activated(x, weight, bias, options, act))
 }
 
 /// The input gradient as flex runs it: Winograd where [`prefers_winograd`]

@@ -604,3 +604,81 @@ fn backend_ops_route_large_3x3_layers_through_winograd() {
     let dw = Flex::conv2d_weight_backward(xt, wt, dyt, opts);
     assert_close("conv2d_weight_backward", &c, &values(&dw), &dw_ref);
 }
+
+/// Patch 13: a convolution with a fused SiLU equals the convolution followed
+/// by Burn's composed SiLU (`x · sigmoid(x)` as two flex ops) bit for bit, on
+/// each route: Winograd, the im2col engine (k×k, strided, 1×1 with an
+/// activation) and the old direct paths (depthwise, then SiLU in place), with
+/// and without a bias, batch 1 and 3, every output element written.
+#[test]
+fn fused_silu_equals_conv_then_composed_silu() {
+    use crate::Flex;
+    use crate::ops::conv2d_activated;
+    use burn_backend::ops::{ActivationOps, FloatTensorOps, ModuleOps};
+    let cases = [
+        case([1, 6, 32, 33], 5, 3, 1, 1, 1, 1), // Winograd (≥ 192 tiles)
+        case([1, 6, 9, 7], 5, 3, 1, 1, 1, 1),   // engine, few tiles
+        case([3, 4, 17, 16], 8, 3, 2, 1, 1, 1), // stride 2
+        case([1, 16, 12, 13], 24, 1, 1, 0, 1, 1), // 1×1: engine only with the activation
+        case([3, 12, 10, 10], 12, 3, 1, 1, 1, 12), // depthwise: old path + in place
+        case([2, 8, 11, 9], 6, 3, 1, 1, 1, 2),  // grouped
+    ];
+    let mut rng = Lcg(13);
+    for c in cases {
+        let opts = ConvOptions::new(c.stride, c.pad, c.dil, c.groups);
+        let w_shape = [c.c_out, c.x[1] / c.groups, c.k[0], c.k[1]];
+        let g = Geometry::new(&c.x, &w_shape, &opts).expect("valid convolution");
+        let (x, w) = (
+            rng.vec(c.x.iter().product()),
+            rng.vec(w_shape.iter().product()),
+        );
+        // Scaled up so that the SiLU sees large negative and positive inputs.
+        let x: Vec<f32> = x.iter().map(|v| 4.0 * v).collect();
+        let (xt, wt) = (t4(x, c.x), t4(w, w_shape));
+        for with_bias in [false, true] {
+            let bias = with_bias.then(|| {
+                FlexTensor::new(
+                    Bytes::from_elems(rng.vec(c.c_out)),
+                    Layout::contiguous(Shape::from(vec![c.c_out])),
+                    DType::F32,
+                )
+            });
+            // What the fused call must equal: the same route without an
+            // activation (the engine for 1×1 too), then Burn's SiLU.
+            let plain = if super::prefers_forward(&g) || g.is_pointwise() {
+                let b = bias.clone();
+                super::conv2d_preferred(
+                    xt.clone(),
+                    wt.clone(),
+                    b,
+                    &opts,
+                    super::Activation::Identity,
+                )
+                .unwrap()
+            } else {
+                Flex::conv2d(xt.clone(), wt.clone(), bias.clone(), opts.clone())
+            };
+            let want = values(&Flex::float_mul(plain.clone(), Flex::sigmoid(plain)));
+            #[cfg(all(feature = "rayon", feature = "std"))]
+            super::poison_scratch(1 << 16, f32::NAN);
+            poison(want.len());
+            let got = conv2d_activated(
+                xt.clone(),
+                wt.clone(),
+                bias,
+                opts.clone(),
+                super::Activation::Silu,
+            );
+            let got = values(&got);
+            assert_finite("fused silu", &c, &got);
+            let same = got
+                .iter()
+                .zip(&want)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(
+                same && got.len() == want.len(),
+                "fused silu differs, bias {with_bias}, {c:?}"
+            );
+        }
+    }
+}

@@ -22,6 +22,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 use super::backward::chunked_sum;
+use super::epilogue::Activation;
 use super::geometry::{Geometry, rows_per_task};
 use super::{Shared, for_each_task, threads};
 
@@ -77,8 +78,15 @@ pub(super) fn forward_weight(g: &Geometry, ws: &[f32]) -> Vec<f32> {
 }
 
 /// Output `[batch, c_out, oh, ow]` of the convolution `g` of `xs` with the
-/// transformed weight `u` ([`transform_weight`]), plus `bias` per channel.
-pub(super) fn conv2d(g: &Geometry, xs: &[f32], u: &[f32], bias: Option<&[f32]>) -> Vec<f32> {
+/// transformed weight `u` ([`transform_weight`]), plus `bias` per channel,
+/// through `act` (applied by each task to the rows it wrote).
+pub(super) fn conv2d(
+    g: &Geometry,
+    xs: &[f32],
+    u: &[f32],
+    bias: Option<&[f32]>,
+    act: Activation,
+) -> Vec<f32> {
     debug_assert!(takes(g));
     let (th, tw) = (g.oh.div_ceil(2), g.ow.div_ceil(2));
     let rows = rows_per_task(th, tw, TILE_TARGET, g.batch, threads());
@@ -93,6 +101,17 @@ pub(super) fn conv2d(g: &Geometry, xs: &[f32], u: &[f32], bias: Option<&[f32]>) 
         // SAFETY: task (b, r0..r1) writes output rows 2·r0..2·r1 of image b
         // only, and `out` outlives `for_each_task`.
         unsafe { task(g, xs, u, bias, dst, b, r0, r1, scratch) };
+        if act != Activation::Identity {
+            let (y0, y1) = (2 * r0, (2 * r1).min(g.oh));
+            for co in 0..g.c_out {
+                let off = (b * g.c_out + co) * g.out_plane() + y0 * g.ow;
+                // SAFETY: rows `y0..y1` of image b are this task's, written
+                // just above.
+                let rows =
+                    unsafe { core::slice::from_raw_parts_mut(dst.at(off), (y1 - y0) * g.ow) };
+                act.apply(rows);
+            }
+        }
     });
     // SAFETY: the tasks cover every tile row of every image, and each writes
     // every channel of its output rows (`winograd_matches_reference` runs on NaN-filled

@@ -26,6 +26,25 @@ fn sigmoid_grad(s: f32, g: f32) -> f32 {
     g * s * (1.0 - s)
 }
 
+/// `x · sigmoid(x)`, the product Burn's composed SiLU computes (the same
+/// sigmoid, one multiplication), so a fused SiLU equals it bit for bit.
+#[inline(always)]
+pub fn silu_f32(x: f32) -> f32 {
+    x * sigmoid_f32(x)
+}
+
+/// `xs[i] = silu(xs[i])` on this thread (a convolution task's epilogue,
+/// patch 13: its rows are still in cache and the task is already on a
+/// worker).
+pub fn silu_inplace_serial(xs: &mut [f32]) {
+    dispatch::unary_inplace(xs, silu_f32)
+}
+
+/// `xs[i] = silu(xs[i])`, split over the pool like [`sigmoid_inplace`].
+pub fn silu_inplace(xs: &mut [f32]) {
+    par_chunks(xs.len(), xs, |_, c| dispatch::unary_inplace(c, silu_f32));
+}
+
 /// `xs[i] = sigmoid(xs[i])`.
 pub fn sigmoid_inplace(xs: &mut [f32]) {
     par_chunks(xs.len(), xs, |_, c| dispatch::unary_inplace(c, sigmoid_f32));

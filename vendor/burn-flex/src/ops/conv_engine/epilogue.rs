@@ -1,0 +1,37 @@
+//! A fused epilogue (patch 13): the activation after a convolution, applied by
+//! the task that has just written the output rows, while they are in cache.
+//!
+//! Why: Burn composes YOLO's SiLU as `x · sigmoid(x)` after the convolution,
+//! i.e. a fresh tensor for the sigmoid, a second for the product, and two
+//! more passes over memory plus two rounds of waking the pool, for every
+//! convolution. At batch 1 and 256 px (a line's usual inference) those small
+//! ops cost a share of the latency comparable to the GEMMs of the deep
+//! layers. ONNX Runtime (MLAS) fuses bias and activation into its
+//! convolution's output tile the same way. Burn has no "convolution with an
+//! activation" op, so callers reach this through
+//! [`crate::ops::module::conv2d_activated`] on a tensor they know is flex's
+//! (chicktrain does so at inference, where no gradient needs the
+//! pre-activation values).
+
+use super::Elem;
+
+/// The activation a forward convolution applies to its output.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Activation {
+    /// The convolution's output as is.
+    #[default]
+    Identity,
+    /// `x · sigmoid(x)`, bit for bit what Burn's `activation::silu` computes
+    /// on flex for f32 (the same sigmoid kernel, one multiplication).
+    Silu,
+}
+
+impl Activation {
+    /// Applies the activation to `xs` in place, on this thread.
+    pub(crate) fn apply<T: Elem>(self, xs: &mut [T]) {
+        match self {
+            Activation::Identity => {}
+            Activation::Silu => T::silu_inplace(xs),
+        }
+    }
+}
