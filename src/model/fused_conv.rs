@@ -2,13 +2,15 @@
 //!
 //! Why: Burn composes SiLU as `x · sigmoid(x)`, so at inference every YOLO conv is followed
 //! by two more ops, each a fresh tensor, a pass over memory and a wake-up of the thread
-//! pool; at batch 1 and 256 px those small ops weigh as much as the deep layers' GEMMs.
-//! burn-flex applies the activation to each output tile while it is still in cache, as
-//! ONNX Runtime does. Burn has no op for a convolution with an activation, so this reaches
-//! into flex's primitives where the tensors are flex's, f32 and outside autodiff (a
-//! training step keeps Burn's ops: its backward needs the pre-activation values). The
-//! result is bit for bit what `silu(conv.forward(x))` gives on flex (burn-flex test
-//! `fused_silu_equals_conv_then_composed_silu`; `fused_conv_silu_equals_composed` here).
+//! pool. burn-flex applies the activation to each output tile while it is still in cache,
+//! as ONNX Runtime does: batch-1 latency 1.12–1.18× faster
+//! (`bench/results/convs/fused_silu_2026-12-07/`). Burn has no op for a convolution with an
+//! activation, so this reaches into flex's primitives where the tensors are flex's, f32 and
+//! outside autodiff (a training step keeps Burn's ops: its backward needs the
+//! pre-activation values). The SiLU is Burn's composition bit for bit on the same
+//! convolution route (burn-flex `fused_silu_equals_conv_then_composed_silu`); 1×1 layers
+//! now take the engine's row tiles, whose GEMMs may sum in another order than flex's old
+//! 1×1 path (`fused_conv_silu_equals_composed` here finds the same bits on its shapes).
 
 use burn::nn::conv::Conv2d;
 use burn::nn::PaddingConfig2d;

@@ -153,3 +153,42 @@ fn threads() -> usize {
         1
     }
 }
+
+/// Patch 13's AVX-512 clone against the AVX2 one and the baseline build: the
+/// SiLU loop on one thread over a 64-channel 32×32 tile (256 KiB, in L2, as
+/// the convolution epilogue sees its rows), clones interleaved, medians of 31.
+/// `cargo test --release --lib sigmoid::bench::bench_silu_clones -- --ignored --nocapture`
+#[cfg(target_arch = "x86_64")]
+#[test]
+#[ignore = "timing; run with --ignored --nocapture"]
+fn bench_silu_clones() {
+    use super::kernels::dispatch::silu_with_clone;
+    let mut seed = 7u64;
+    let src = tensor(&[64, 32, 32], &mut seed, 8.0);
+    let src: Vec<f32> = src.storage::<f32>().to_vec();
+    let clones = ["baseline", "avx2", "avx512"];
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); clones.len()];
+    let mut buf = src.clone();
+    for _ in 0..31 {
+        for (i, c) in clones.iter().enumerate() {
+            buf.copy_from_slice(&src);
+            let t = Instant::now();
+            for _ in 0..20 {
+                if !silu_with_clone(core::hint::black_box(&mut buf), c) {
+                    break;
+                }
+            }
+            times[i].push(t.elapsed().as_secs_f64() / 20.0);
+        }
+    }
+    for (c, mut t) in clones.iter().zip(times) {
+        t.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        let med = t[t.len() / 2];
+        println!(
+            "silu {c:>8}: {:8.1} µs per {} elements, {:.2} ns/element",
+            med * 1e6,
+            src.len(),
+            med * 1e9 / src.len() as f64
+        );
+    }
+}

@@ -1,6 +1,6 @@
-//! Slice kernels for the f32 sigmoid and its gradient, built on
-//! [`super::exp::exp_f32`], compiled twice on x86-64 (baseline SSE2 and an
-//! AVX2 clone picked at run time) and split over the rayon pool for large
+//! Slice kernels for the f32 sigmoid, its gradient and SiLU, built on
+//! [`super::exp::exp_f32`], compiled three times on x86-64 (baseline SSE2, an
+//! AVX2 clone and an AVX-512 clone picked at run time) and split over the rayon pool for large
 //! slices. Every element is computed by the same branch-free formula in
 //! every clone and every chunk, so results do not depend on the CPU's
 //! features or the thread count.
@@ -95,10 +95,10 @@ where
     f(0, dst);
 }
 
-/// The element loops, with an AVX2 clone chosen at run time on x86-64
-/// (flex is built for baseline x86-64, where LLVM vectorises them four
-/// lanes wide with SSE2; the clone gives eight).
-mod dispatch {
+/// The element loops, with AVX2 and AVX-512 clones chosen at run time on
+/// x86-64 (flex is built for baseline x86-64, where LLVM vectorises them four
+/// lanes wide with SSE2; the clones give eight and sixteen).
+pub(crate) mod dispatch {
     use core::mem::MaybeUninit;
 
     #[inline(always)]
@@ -129,6 +129,56 @@ mod dispatch {
         std::arch::is_x86_feature_detected!("avx2")
     }
 
+    /// Whether the AVX-512 clones may run (patch 13: sixteen lanes; the loops
+    /// are bound by `vdivps`, whose 512-bit form does twice the work per
+    /// instruction on the CPUs that have it).
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    #[inline(always)]
+    fn has_avx512() -> bool {
+        std::arch::is_x86_feature_detected!("avx512f")
+    }
+
+    // The same loops with AVX-512 enabled. No FMA is formed (Rust does not
+    // contract `a * b + c`), so every clone gives the same bits.
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    #[target_feature(enable = "avx512f")]
+    fn unary_inplace_avx512(xs: &mut [f32], f: impl Fn(f32) -> f32) {
+        unary_inplace_body(xs, f)
+    }
+
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    #[target_feature(enable = "avx512f")]
+    fn unary_into_avx512(src: &[f32], dst: &mut [MaybeUninit<f32>], f: impl Fn(f32) -> f32) {
+        unary_into_body(src, dst, f)
+    }
+
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    #[target_feature(enable = "avx512f")]
+    fn binary_inplace_avx512(xs: &mut [f32], ys: &[f32], f: impl Fn(f32, f32) -> f32) {
+        binary_inplace_body(xs, ys, f)
+    }
+
+    /// The SiLU loop through one named clone (`"avx512"`, `"avx2"`, anything
+    /// else baseline), for the clone bench; `false` when the CPU lacks it.
+    #[cfg(all(test, feature = "std", target_arch = "x86_64"))]
+    pub(crate) fn silu_with_clone(xs: &mut [f32], clone: &str) -> bool {
+        match clone {
+            // SAFETY: the CPU supports the clone's features (checked first).
+            "avx512" if has_avx512() => unsafe { unary_inplace_avx512(xs, super::silu_f32) },
+            "avx2" if has_avx2() => unsafe { unary_inplace_avx2(xs, super::silu_f32) },
+            "avx512" | "avx2" => return false,
+            _ => unary_inplace_body(xs, super::silu_f32),
+        }
+        true
+    }
+
+    /// The loops compiled for baseline x86-64 only, whatever the CPU (tests:
+    /// every clone must give these bits).
+    #[cfg(test)]
+    pub(crate) fn unary_inplace_baseline(xs: &mut [f32], f: impl Fn(f32) -> f32) {
+        unary_inplace_body(xs, f)
+    }
+
     // One AVX2 clone per loop; `f` is inlined into it, so LLVM vectorises
     // the loop eight lanes wide. The `has_avx2` check is in the caller.
     #[cfg(all(feature = "std", target_arch = "x86_64"))]
@@ -151,6 +201,11 @@ mod dispatch {
 
     pub(super) fn unary_inplace(xs: &mut [f32], f: impl Fn(f32) -> f32) {
         #[cfg(all(feature = "std", target_arch = "x86_64"))]
+        if has_avx512() {
+            // SAFETY: the CPU supports AVX-512F (checked just above).
+            return unsafe { unary_inplace_avx512(xs, f) };
+        }
+        #[cfg(all(feature = "std", target_arch = "x86_64"))]
         if has_avx2() {
             // SAFETY: the CPU supports AVX2 (checked just above).
             return unsafe { unary_inplace_avx2(xs, f) };
@@ -160,6 +215,11 @@ mod dispatch {
 
     pub(super) fn unary_into(src: &[f32], dst: &mut [MaybeUninit<f32>], f: impl Fn(f32) -> f32) {
         #[cfg(all(feature = "std", target_arch = "x86_64"))]
+        if has_avx512() {
+            // SAFETY: the CPU supports AVX-512F (checked just above).
+            return unsafe { unary_into_avx512(src, dst, f) };
+        }
+        #[cfg(all(feature = "std", target_arch = "x86_64"))]
         if has_avx2() {
             // SAFETY: the CPU supports AVX2 (checked just above).
             return unsafe { unary_into_avx2(src, dst, f) };
@@ -168,6 +228,11 @@ mod dispatch {
     }
 
     pub(super) fn binary_inplace(xs: &mut [f32], ys: &[f32], f: impl Fn(f32, f32) -> f32) {
+        #[cfg(all(feature = "std", target_arch = "x86_64"))]
+        if has_avx512() {
+            // SAFETY: the CPU supports AVX-512F (checked just above).
+            return unsafe { binary_inplace_avx512(xs, ys, f) };
+        }
         #[cfg(all(feature = "std", target_arch = "x86_64"))]
         if has_avx2() {
             // SAFETY: the CPU supports AVX2 (checked just above).

@@ -307,3 +307,55 @@ fn backend_hooks_route_f32_here_and_keep_upstream_for_f64() {
         assert_eq!(d.to_bits(), (2.0 * s * (1.0 - s)).to_bits(), "element {i}");
     }
 }
+
+/// Patch 13: whichever clone this CPU runs (AVX-512, AVX2 or baseline), the
+/// sigmoid and SiLU slice kernels give the baseline build's bits, on a sweep
+/// over ±120 plus the special values, at lengths that leave a remainder after
+/// every vector width.
+#[test]
+fn every_clone_gives_the_baseline_bits() {
+    let mut xs: Vec<f32> = sweep(-120.0, 120.0, 997).collect();
+    xs.extend([
+        0.0,
+        -0.0,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        f32::MIN_POSITIVE,
+        -f32::MIN_POSITIVE,
+        88.72,
+        -103.9,
+    ]);
+    for len in [xs.len(), 1, 7, 15, 17, 33] {
+        let src = &xs[..len];
+        for (name, f) in [
+            ("sigmoid", sigmoid_f32 as fn(f32) -> f32),
+            ("silu", kernels::silu_f32 as fn(f32) -> f32),
+        ] {
+            let mut want = src.to_vec();
+            kernels::dispatch::unary_inplace_baseline(&mut want, f);
+            let mut got = src.to_vec();
+            if name == "sigmoid" {
+                kernels::sigmoid_inplace(&mut got);
+            } else {
+                kernels::silu_inplace(&mut got);
+            }
+            let mut serial = src.to_vec();
+            if name == "silu" {
+                kernels::silu_inplace_serial(&mut serial);
+                assert!(
+                    bits_eq(&serial, &want),
+                    "silu_inplace_serial differs, len {len}"
+                );
+            }
+            assert!(
+                bits_eq(&got, &want),
+                "{name} differs from baseline, len {len}"
+            );
+        }
+    }
+}
+
+fn bits_eq(a: &[f32], b: &[f32]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
