@@ -69,7 +69,8 @@ pub fn conv2d_activated(
             let geometry =
                 conv_engine::Geometry::new(x.layout().shape(), weight.layout().shape(), &options);
             match geometry {
-                // Large stride-1 3×3 layers (all k×k) through Winograd (patch 12).
+                // k×k and strided layers (large stride-1 3×3 ones through
+                // Winograd, patch 12), and 1×1 ones when there is an epilogue.
                 Some(g)
                     if conv_engine::prefers_forward(&g)
                         || (act != Activation::Identity && g.is_pointwise()) =>
