@@ -26,15 +26,6 @@ pub fn conv_silu(conv: &Conv2d, x: Tensor<4>) -> Result<Tensor<4>, Tensor<4>> {
     let PaddingConfig2d::Explicit(top, left, bottom, right) = conv.padding else {
         return Err(x);
     };
-    let f32s = x.dtype() == DType::F32
-        && conv.weight.val().dtype() == DType::F32
-        && conv
-            .bias
-            .as_ref()
-            .is_none_or(|b| b.val().dtype() == DType::F32);
-    if !f32s {
-        return Err(x);
-    }
     let Ok(weight) = conv.weight.val().try_into_primitive::<Flex>() else {
         return Err(x);
     };
@@ -49,6 +40,10 @@ pub fn conv_silu(conv: &Conv2d, x: Tensor<4>) -> Result<Tensor<4>, Tensor<4>> {
     let Ok(input) = x.clone().try_into_primitive::<Flex>() else {
         return Err(x);
     };
+    let f32s = [Some(&input), Some(&weight), bias.as_ref()];
+    if f32s.iter().flatten().any(|t| t.dtype() != DType::F32) {
+        return Err(x);
+    }
     drop(x);
     let options = ConvOptions::new_with_padding(
         conv.stride,

@@ -12,7 +12,7 @@
 //! (chicktrain does so at inference, where no gradient needs the
 //! pre-activation values).
 
-use super::Elem;
+use super::{Elem, Shared};
 
 /// The activation a forward convolution applies to its output.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -26,11 +26,31 @@ pub enum Activation {
 }
 
 impl Activation {
-    /// Applies the activation to `xs` in place, on this thread.
-    pub(crate) fn apply<T: Elem>(self, xs: &mut [T]) {
-        match self {
-            Activation::Identity => {}
-            Activation::Silu => T::silu_inplace(xs),
+    /// Applies the activation, on this thread, to one run of `len` elements in
+    /// each of `channels` planes of the output behind `dst`: the runs at
+    /// `off + c · plane`, as a task has just written them.
+    ///
+    /// # Safety
+    /// Every run lies inside `dst`'s allocation, is initialised, and belongs
+    /// to the calling task alone.
+    pub(crate) unsafe fn apply_to_planes<T: Elem>(
+        self,
+        dst: Shared<T>,
+        off: usize,
+        channels: usize,
+        plane: usize,
+        len: usize,
+    ) {
+        if self == Activation::Identity {
+            return;
+        }
+        for c in 0..channels {
+            // SAFETY: the caller's contract.
+            let run = unsafe { core::slice::from_raw_parts_mut(dst.at(off + c * plane), len) };
+            match self {
+                Activation::Identity => {}
+                Activation::Silu => T::silu_inplace(run),
+            }
         }
     }
 }

@@ -108,13 +108,7 @@ unsafe fn tile<T: Elem>(
             gemm::Parallelism::None,
         );
     }
-    if act != Activation::Identity {
-        for c in 0..g.mpg {
-            // SAFETY: row range `r0..r1` of channel `c` of this (image, group)
-            // is this task's (the caller's contract), just written above.
-            let row =
-                unsafe { core::slice::from_raw_parts_mut(dst.at(out_off + c * g.out_plane()), n) };
-            act.apply(row);
-        }
-    }
+    // SAFETY: rows `r0..r1` of this (image, group)'s channels are this task's
+    // (the caller's contract), written just above.
+    unsafe { act.apply_to_planes(dst, out_off, g.mpg, g.out_plane(), n) };
 }

@@ -101,17 +101,10 @@ pub(super) fn conv2d(
         // SAFETY: task (b, r0..r1) writes output rows 2·r0..2·r1 of image b
         // only, and `out` outlives `for_each_task`.
         unsafe { task(g, xs, u, bias, dst, b, r0, r1, scratch) };
-        if act != Activation::Identity {
-            let (y0, y1) = (2 * r0, (2 * r1).min(g.oh));
-            for co in 0..g.c_out {
-                let off = (b * g.c_out + co) * g.out_plane() + y0 * g.ow;
-                // SAFETY: rows `y0..y1` of image b are this task's, written
-                // just above.
-                let rows =
-                    unsafe { core::slice::from_raw_parts_mut(dst.at(off), (y1 - y0) * g.ow) };
-                act.apply(rows);
-            }
-        }
+        let (y0, y1) = (2 * r0, (2 * r1).min(g.oh));
+        let off = b * g.c_out * g.out_plane() + y0 * g.ow;
+        // SAFETY: rows `y0..y1` of image b are this task's, written just above.
+        unsafe { act.apply_to_planes(dst, off, g.c_out, g.out_plane(), (y1 - y0) * g.ow) };
     });
     // SAFETY: the tasks cover every tile row of every image, and each writes
     // every channel of its output rows (`winograd_matches_reference` runs on NaN-filled

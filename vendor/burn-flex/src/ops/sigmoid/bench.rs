@@ -162,7 +162,8 @@ fn threads() -> usize {
 #[test]
 #[ignore = "timing; run with --ignored --nocapture"]
 fn bench_silu_clones() {
-    use super::kernels::dispatch::silu_with_clone;
+    use super::kernels::dispatch::unary_inplace_with_clone;
+    use super::kernels::silu_f32;
     let mut seed = 7u64;
     let src = tensor(&[64, 32, 32], &mut seed, 8.0);
     let src: Vec<f32> = src.storage::<f32>().to_vec();
@@ -174,7 +175,7 @@ fn bench_silu_clones() {
             buf.copy_from_slice(&src);
             let t = Instant::now();
             for _ in 0..20 {
-                if !silu_with_clone(core::hint::black_box(&mut buf), c) {
+                if !unary_inplace_with_clone(core::hint::black_box(&mut buf), c, silu_f32) {
                     break;
                 }
             }

@@ -158,25 +158,35 @@ pub(crate) mod dispatch {
         binary_inplace_body(xs, ys, f)
     }
 
-    /// The SiLU loop through one named clone (`"avx512"`, `"avx2"`, anything
-    /// else baseline), for the clone bench; `false` when the CPU lacks it.
-    #[cfg(all(test, feature = "std", target_arch = "x86_64"))]
-    pub(crate) fn silu_with_clone(xs: &mut [f32], clone: &str) -> bool {
-        match clone {
-            // SAFETY: the CPU supports the clone's features (checked first).
-            "avx512" if has_avx512() => unsafe { unary_inplace_avx512(xs, super::silu_f32) },
-            "avx2" if has_avx2() => unsafe { unary_inplace_avx2(xs, super::silu_f32) },
-            "avx512" | "avx2" => return false,
-            _ => unary_inplace_body(xs, super::silu_f32),
-        }
-        true
-    }
-
-    /// The loops compiled for baseline x86-64 only, whatever the CPU (tests:
-    /// every clone must give these bits).
+    /// The in-place loop through one named clone: `"avx512"`, `"avx2"`, or
+    /// anything else for the baseline build whatever the CPU (the tests hold
+    /// every clone to its bits; the clone bench times them). `false` when the
+    /// CPU lacks the clone.
     #[cfg(test)]
-    pub(crate) fn unary_inplace_baseline(xs: &mut [f32], f: impl Fn(f32) -> f32) {
-        unary_inplace_body(xs, f)
+    pub(crate) fn unary_inplace_with_clone(
+        xs: &mut [f32],
+        clone: &str,
+        f: impl Fn(f32) -> f32,
+    ) -> bool {
+        #[cfg(all(feature = "std", target_arch = "x86_64"))]
+        match clone {
+            "avx512" if has_avx512() => {
+                // SAFETY: the CPU supports AVX-512F (checked just above).
+                unsafe { unary_inplace_avx512(xs, f) };
+                return true;
+            }
+            "avx2" if has_avx2() => {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                unsafe { unary_inplace_avx2(xs, f) };
+                return true;
+            }
+            _ => {}
+        }
+        if clone == "avx512" || clone == "avx2" {
+            return false;
+        }
+        unary_inplace_body(xs, f);
+        true
     }
 
     // One AVX2 clone per loop; `f` is inlined into it, so LLVM vectorises

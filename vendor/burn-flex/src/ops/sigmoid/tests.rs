@@ -333,7 +333,9 @@ fn every_clone_gives_the_baseline_bits() {
             ("silu", kernels::silu_f32 as fn(f32) -> f32),
         ] {
             let mut want = src.to_vec();
-            kernels::dispatch::unary_inplace_baseline(&mut want, f);
+            assert!(kernels::dispatch::unary_inplace_with_clone(
+                &mut want, "baseline", f
+            ));
             let mut got = src.to_vec();
             if name == "sigmoid" {
                 kernels::sigmoid_inplace(&mut got);
