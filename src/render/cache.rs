@@ -14,7 +14,7 @@ use anyhow::{bail, Context, Result};
 
 use super::{
     encode_sample, render_sample, ImageFormat, InstanceLabel, RenderOptions, RenderedSample,
-    Timings, RANDOMIZE_VERSION, RENDERER_VERSION,
+    Timings, CLUTTER_VERSION, RANDOMIZE_VERSION, RENDERER_VERSION,
 };
 use crate::util::hash::{fnv, mix64, FNV_OFFSET};
 
@@ -36,11 +36,15 @@ pub fn cache_key(opts: &RenderOptions, seed: u64) -> Result<String> {
     // Renders with randomisation groups on carry the groups' version too: caches written
     // before the groups drew anything (same options, base-look pixels) must not be reused.
     // The base look keeps its old key.
-    let version = if o.randomize.is_off() {
+    let mut version = if o.randomize.is_off() {
         RENDERER_VERSION.to_string()
     } else {
         format!("{RENDERER_VERSION}+{RANDOMIZE_VERSION}")
     };
+    // The same for clutter pictures: a cache of the version before must not be reused.
+    if o.negatives.clutter > 0.0 {
+        version = format!("{version}+{CLUTTER_VERSION}");
+    }
     let text = format!("{version}\n{}\n{seed}", serde_json::to_string(&o)?);
     let mut h = fnv(FNV_OFFSET, text.as_bytes());
     if let Some(path) = &opts.carcass {
@@ -243,5 +247,22 @@ mod key_tests {
         let on = cache_key(&o, 3).unwrap();
         assert_ne!(on, base);
         assert_ne!(on, legacy(&o));
+    }
+
+    /// Renders with clutter pictures carry the clutter version: a cache written by the
+    /// flat-shapes-only pictures (the same options) is not reused.
+    #[test]
+    fn cluttered_renders_carry_the_clutter_version_in_their_key() {
+        let mut o = RenderOptions::synthetic(64);
+        o.negatives.clutter = 0.1;
+        let mut c = o.clone();
+        c.count = 0;
+        c.seed = 0;
+        let text = format!(
+            "{RENDERER_VERSION}\n{}\n3",
+            serde_json::to_string(&c).unwrap()
+        );
+        let without = format!("{:016x}", mix64(fnv(FNV_OFFSET, text.as_bytes())));
+        assert_ne!(cache_key(&o, 3).unwrap(), without);
     }
 }

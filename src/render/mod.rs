@@ -70,6 +70,10 @@ pub const RENDERER_VERSION: &str = "chicktrain-render-1";
 /// Version of what the randomisation groups draw; part of the cache key of every render
 /// with a group on (bump it when a group's ranges or sampling change).
 pub const RANDOMIZE_VERSION: &str = "randomize-1";
+/// Version of the clutter pictures ([`clutter`]); part of the cache key of every render
+/// with a clutter share > 0 (bump it when what a clutter picture draws changes: a run of
+/// 2026-12-08 trained a changed drawing on the old pictures from the cache).
+pub const CLUTTER_VERSION: &str = "clutter-1";
 
 /// Where the time of one image went.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
