@@ -8,7 +8,9 @@
 //! sizes, random colours, shading and texture, each hiding what lies under it — have the
 //! occlusions, scales and colour spread of ordinary photos and no carcass in them. The
 //! shapes are flat 2D figures (discs, ellipses, boxes, strokes), not shaded 3D blobs, so
-//! they never look like a rendered carcass.
+//! they never look like a rendered carcass (shaded 3D solids were tried and did not cut the
+//! false carcasses: bench/results/negatives/2026-12-08). A change to what is drawn here
+//! bumps `render::CLUTTER_VERSION`, or runs reuse the old pictures from the render cache.
 
 use image::RgbImage;
 use rand::Rng;
